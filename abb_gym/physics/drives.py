@@ -1,0 +1,251 @@
+"""Drives: how the rotor spin is set.
+
+* :class:`SpeedProfile` prescribes the rotor angle exactly (infinite drive inertia): a sequence
+  of constant-acceleration segments, so psi, psi' and psi'' are exact quadratics, constants and
+  piecewise constants.  Ramps, constant-speed dwells, constant-acceleration or deceleration
+  dwells (Yoshida ch. 3-4) and the hold at operating speed are all such segments.
+* :class:`MotorDrive` makes the rotor spin a degree of freedom (Spannan eq. 4.16) driven by a
+  motor torque ``T = clip(T_cmd + g (w_target(t) - w), -T_max, T_max)``.  With ``g = 0`` it is
+  a torque command; with ``T_cmd = 0`` it is the limited-power drive of Spannan (note section
+  1.5), ``M_0 = beta_0 (w_target - w)``.  The bearing drag of the scene acts in addition.
+
+Both produce a segment table for the compiled kernels (one row per segment, see
+:mod:`abb_gym.physics.model`), with segment starts at every breakpoint so that fixed-step
+integrators never step across a jump of the acceleration.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from . import model as mdl
+from .scene import Scene
+
+__all__ = ["SpeedProfile", "MotorDrive"]
+
+
+def _finite(name: str, value: float, *, positive: bool = False, nonneg: bool = False,
+            unit: str = "") -> float:
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite [{unit}] (got {value!r})")
+    if positive and v <= 0:
+        raise ValueError(f"{name} must be > 0 [{unit}] (got {v})")
+    if nonneg and v < 0:
+        raise ValueError(f"{name} must be >= 0 [{unit}] (got {v})")
+    return v
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """Piecewise-constant rotor acceleration.
+
+    ``segments`` is a sequence of ``(duration [s], acceleration [rad/s^2])``; after the last
+    segment the speed is held (acceleration 0).  A final duration of ``inf`` keeps that segment
+    going.  The rotor starts at ``initial_angle`` [rad] and ``initial_speed`` [rad/s].
+    """
+
+    segments: tuple[tuple[float, float], ...]
+    initial_speed: float = 0.0
+    initial_angle: float = 0.0
+
+    def __post_init__(self) -> None:
+        segs = []
+        for k, seg in enumerate(self.segments):
+            if len(seg) != 2:
+                raise ValueError(f"segments[{k}] must be (duration, acceleration), got {seg!r}")
+            dur, acc = float(seg[0]), float(seg[1])
+            if math.isnan(dur) or dur < 0:
+                raise ValueError(f"segments[{k}] duration must be >= 0 [s] (got {dur})")
+            if math.isinf(dur) and k != len(self.segments) - 1:
+                raise ValueError(f"segments[{k}] duration is infinite; only the last may be")
+            segs.append((dur, _finite(f"segments[{k}] acceleration", acc, unit="rad/s^2")))
+        object.__setattr__(self, "segments", tuple(segs))
+        _finite("initial_speed", self.initial_speed, unit="rad/s")
+        _finite("initial_angle", self.initial_angle, unit="rad")
+        # a speed profile that turns the rotor backwards is almost always a typo
+        speed = self.initial_speed
+        for k, (dur, acc) in enumerate(segs):
+            end = speed + acc * dur if math.isfinite(dur) else (speed if acc == 0 else
+                                                                 math.copysign(math.inf, acc))
+            if end < -1e-12:
+                raise ValueError(f"segments[{k}] drives the rotor speed negative "
+                                 f"({speed:g} rad/s with {acc:g} rad/s^2 for {dur:g} s)")
+            speed = end
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def constant(cls, speed: float, angle: float = 0.0) -> "SpeedProfile":
+        """Constant speed [rad/s] from t = 0."""
+        _finite("speed", speed, nonneg=True, unit="rad/s")
+        return cls(segments=(), initial_speed=speed, initial_angle=angle)
+
+    @classmethod
+    def ramp(cls, accel: float, operating_speed: float | None = None) -> "SpeedProfile":
+        """Run-up from rest at ``accel`` [rad/s^2], held at ``operating_speed`` [rad/s] if given."""
+        accel = _finite("accel", accel, positive=True, unit="rad/s^2")
+        if operating_speed is None:
+            return cls(segments=((math.inf, accel),))
+        op = _finite("operating_speed", operating_speed, positive=True, unit="rad/s")
+        return cls(segments=((op / accel, accel),))
+
+    @classmethod
+    def dwell(cls, accel: float, dwell_speed: float, dwell_time: float,
+              dwell_accel: float = 0.0, operating_speed: float | None = None) -> "SpeedProfile":
+        """Yoshida's variable-speed period.
+
+        Ramp from rest at ``accel`` [rad/s^2] to ``dwell_speed`` [rad/s] (reached at
+        t_s = dwell_speed/accel), then ``dwell_time`` [s] at ``dwell_accel`` [rad/s^2] (0: a
+        constant-speed dwell, > 0: a constant-acceleration dwell, < 0: a deceleration dwell),
+        then ``accel`` again up to ``operating_speed`` [rad/s] (held) or for ever if None.
+        """
+        accel = _finite("accel", accel, positive=True, unit="rad/s^2")
+        dwell_speed = _finite("dwell_speed", dwell_speed, nonneg=True, unit="rad/s")
+        dwell_time = _finite("dwell_time", dwell_time, nonneg=True, unit="s")
+        dwell_accel = _finite("dwell_accel", dwell_accel, unit="rad/s^2")
+        after = dwell_speed + dwell_accel * dwell_time
+        segs = [(dwell_speed / accel, accel), (dwell_time, dwell_accel)]
+        if operating_speed is None:
+            segs.append((math.inf, accel))
+        else:
+            op = _finite("operating_speed", operating_speed, positive=True, unit="rad/s")
+            if op < after:
+                raise ValueError(f"operating_speed ({op:g} rad/s) must be >= the speed at the "
+                                 f"end of the dwell ({after:g} rad/s)")
+            segs.append(((op - after) / accel, accel))
+        return cls(segments=tuple(segs))
+
+    # ------------------------------------------------------------------ evaluation
+    def _table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Start times, start angles, start speeds and accelerations of all segments + hold."""
+        t0, th0, w0, acc = [0.0], [self.initial_angle], [self.initial_speed], []
+        for dur, a in self.segments:
+            acc.append(a)
+            if math.isinf(dur):
+                break
+            th0.append(th0[-1] + w0[-1] * dur + 0.5 * a * dur * dur)
+            w0.append(w0[-1] + a * dur)
+            t0.append(t0[-1] + dur)
+        else:
+            acc.append(0.0)
+        return np.array(t0), np.array(th0), np.array(w0), np.array(acc)
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """Times [s] where the acceleration may jump (segment starts, t = 0 included)."""
+        return self._table()[0]
+
+    def _evaluate(self, t):
+        t0, th0, w0, acc = self._table()
+        t = np.asarray(t, dtype=float)
+        k = np.clip(np.searchsorted(t0, t, side="right") - 1, 0, len(t0) - 1)
+        tau = t - t0[k]
+        return th0[k] + w0[k] * tau + 0.5 * acc[k] * tau * tau, w0[k] + acc[k] * tau, acc[k]
+
+    def angle(self, t):
+        """Rotor angle psi(t) [rad]."""
+        return self._evaluate(t)[0]
+
+    def speed(self, t):
+        """Rotor speed psi'(t) [rad/s]."""
+        return self._evaluate(t)[1]
+
+    def acceleration(self, t):
+        """Rotor acceleration psi''(t) [rad/s^2] (right-continuous at breakpoints)."""
+        return self._evaluate(t)[2] + np.zeros(np.shape(t))
+
+    def max_speed(self, t_end: float) -> float:
+        """Largest speed [rad/s] on [0, t_end]."""
+        t0 = self.breakpoints
+        ts = np.concatenate([t0[t0 <= t_end], [t_end]])
+        return float(np.max(np.abs(self.speed(ts))))
+
+    def segment_table(self, t_end: float, scene: Scene | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(segment start times, drive rows) for the kernels, covering [0, t_end]."""
+        t0, th0, w0, acc = self._table()
+        keep = t0 < t_end
+        keep[0] = True
+        rows = np.zeros((int(keep.sum()), mdl.N_DRIVE))
+        rows[:, mdl.D_T0] = t0[keep]
+        rows[:, mdl.D_TH0] = th0[keep]
+        rows[:, mdl.D_W0] = w0[keep]
+        rows[:, mdl.D_ALPHA] = acc[keep]
+        rows[:, mdl.D_MODE] = mdl.MODE_PRESCRIBED
+        return rows[:, mdl.D_T0].copy(), rows
+
+    def initial_rotor_state(self) -> tuple[float, float]:
+        """(angle [rad], speed [rad/s]) at t = 0."""
+        return self.initial_angle, self.initial_speed
+
+
+@dataclass(frozen=True)
+class MotorDrive:
+    """Rotor spin as a degree of freedom, driven by a torque-limited motor.
+
+    ``T = clip(torque + speed_gain * (w_target(t) - w), -torque_limit, torque_limit)`` [N m]
+    with ``w_target`` a constant [rad/s] or a :class:`SpeedProfile`.  ``torque_limit`` None
+    takes the scene's ``drive_torque_limit``.
+    """
+
+    torque: float = 0.0
+    speed_gain: float = 0.0
+    target: float | SpeedProfile = 0.0
+    torque_limit: float | None = None
+    initial_speed: float = 0.0
+    initial_angle: float = 0.0
+
+    def __post_init__(self) -> None:
+        _finite("torque", self.torque, unit="N m")
+        _finite("speed_gain", self.speed_gain, nonneg=True, unit="N m s")
+        if not isinstance(self.target, SpeedProfile):
+            _finite("target", self.target, unit="rad/s")
+        if self.torque_limit is not None:
+            _finite("torque_limit", self.torque_limit, positive=True, unit="N m")
+        _finite("initial_speed", self.initial_speed, unit="rad/s")
+        _finite("initial_angle", self.initial_angle, unit="rad")
+
+    @classmethod
+    def constant_torque(cls, torque: float, torque_limit: float | None = None) -> "MotorDrive":
+        """A constant torque command [N m] (clipped to the limit)."""
+        return cls(torque=torque, torque_limit=torque_limit)
+
+    @classmethod
+    def limited_power(cls, gain: float, target: float | SpeedProfile,
+                      torque_limit: float | None = None) -> "MotorDrive":
+        """Spannan's drive M_0 = beta_0 (w_target - w) with beta_0 = ``gain`` [N m s]."""
+        return cls(speed_gain=_finite("gain", gain, positive=True, unit="N m s"),
+                   target=target, torque_limit=torque_limit)
+
+    def limit(self, scene: Scene) -> float:
+        return scene.drive_torque_limit if self.torque_limit is None else self.torque_limit
+
+    def segment_table(self, t_end: float, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        if isinstance(self.target, SpeedProfile):
+            t0, _, w0, acc = self.target._table()
+            keep = t0 < t_end
+            keep[0] = True
+            t0, w0, acc = t0[keep], w0[keep], acc[keep]
+        else:
+            t0, w0, acc = np.zeros(1), np.array([float(self.target)]), np.zeros(1)
+        rows = np.zeros((len(t0), mdl.N_DRIVE))
+        rows[:, mdl.D_T0] = t0
+        rows[:, mdl.D_MODE] = mdl.MODE_MOTOR
+        rows[:, mdl.D_TORQUE] = self.torque
+        rows[:, mdl.D_GAIN] = self.speed_gain
+        rows[:, mdl.D_TW0] = w0
+        rows[:, mdl.D_TALPHA] = acc
+        rows[:, mdl.D_TLIM] = self.limit(scene)
+        return t0.copy(), rows
+
+    def torque_at(self, t, speed, scene: Scene):
+        """Motor torque [N m] at times ``t`` and rotor speeds ``speed``."""
+        target = self.target.speed(t) if isinstance(self.target, SpeedProfile) \
+            else np.full(np.shape(t), float(self.target))
+        lim = self.limit(scene)
+        return np.clip(self.torque + self.speed_gain * (target - speed), -lim, lim)
+
+    def initial_rotor_state(self) -> tuple[float, float]:
+        return self.initial_angle, self.initial_speed

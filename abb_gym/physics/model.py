@@ -1,0 +1,353 @@
+"""Equations of motion of the planar rotor with an n-ball automatic balancer (compiled).
+
+Generalised coordinates ``q = [x, y, th, ph_1 .. ph_n]``:
+
+* ``x, y`` [m] deflection of the rotor centre from the bearing axis (fixed frame),
+* ``th`` [rad] rotor angle, measured to the primary imbalance,
+* ``ph_i`` [rad] angle of ball i relative to the rotor, measured from the imbalance
+  (the balanced position of two balls against a small imbalance is near +-pi).
+
+The state is ``s = [q, q']`` (length ``2 (3 + n)``).
+
+Equations: Spannan (2021) eqs. (4.14)-(4.17) in the symmetric mass-matrix form of the physics
+note (section 1.4), which was re-derived here from the kinetic energy of point masses plus ball
+spin (the test-suite checks the mass matrix and the velocity terms against finite differences of
+the kinematics (4.9)), plus rolling resistance:
+
+    row x   M x'' - Sx th'' - sum m_i R sin(th+ph_i) ph_i''
+              = -c_x x' - k_x x + U0 cos th th'^2
+                + sum [E m_i cos(th+gam) th'^2 + m_i R (th'+ph_i')^2 cos(th+ph_i)]
+    row y   M y'' + Cy th'' + sum m_i R cos(th+ph_i) ph_i''
+              = -c_y y' - k_y y + U0 sin th th'^2
+                + sum [E m_i sin(th+gam) th'^2 + m_i R (th'+ph_i')^2 sin(th+ph_i)]
+    row th  Jt th'' - Sx x'' + Cy y'' + sum c_i ph_i''
+              = T_motor - beta_0 th' - sum E m_i R sin(gam-ph_i) ph_i' (2 th' + ph_i')
+    row ph  I_i ph_i'' - m_i R sin(th+ph_i) x'' + m_i R cos(th+ph_i) y'' + c_i th''
+              = -beta_i ph_i' + m_i R E sin(gam-ph_i) th'^2 + Q_roll,i
+
+    Sx  = U0 sin th + sum [E m_i sin(th+gam) + m_i R sin(th+ph_i)]
+    Cy  = U0 cos th + sum [E m_i cos(th+gam) + m_i R cos(th+ph_i)]
+    Jt  = J + sum [J_i + m_i E^2 + m_i R^2 + 2 E m_i R cos(gam-ph_i)]
+    c_i = m_i R^2 + E m_i R cos(gam-ph_i) - J_i R / r_i
+    I_i = J_i R^2 / r_i^2 + m_i R^2
+
+with M the total mass (rotor + balls), U0 = m0 e0 the primary imbalance, J the rotor's polar
+inertia (including its imbalance), R the ball-centre track radius, r_i, J_i the ball radius and
+spin inertia, beta_i = c_b,i R^2 the race-drag torque coefficient, E and gam the race eccentricity.
+
+Decisions recorded here:
+
+* Rolling constraint: Spannan's (4.8) ``R ph + (kappa - th) r = 0`` is exact for a ball whose
+  centre runs on radius R and touches the outer race at R + r (its contact point is at rest in
+  the rotor frame), so no (R + r) correction is applied.
+* Yoshida's ball equation (2-11) is this ph-row divided by R with th = psi prescribed; the term
+  ``((R + a)/a^2) I psi''`` of the thesis is exactly the ``c_i th''`` coupling (c_i = m R^2 -
+  J R / a) once ``psi_i'' = psi'' + ph_i''`` is substituted, so the thesis and Spannan agree.
+  The race drag maps as beta = c_b R^2 (Yoshida's Rayleigh term c_b/2 R^2 (psi_i' - psi')^2).
+* Rolling resistance (Yoshida eq. 2-8, Spannan eq. 5.14): a torque of the normal force N_i about
+  an offset beta_b on the ball spin, i.e. a generalised force
+  ``Q_roll,i = -(beta_b / r_i) R N_i sgn(ph_i')`` with the race normal force
+  ``N_i = m_i [R (th'+ph_i')^2 + E th'^2 cos(gam-ph_i) + E th'' sin(gam-ph_i)
+               - x'' cos(th+ph_i) - y'' sin(th+ph_i)]``
+  (the inward acceleration of the ball centre; with E = 0 it is Yoshida's bracket).  Its
+  acceleration terms enter the left-hand side, which makes that part of the matrix
+  non-symmetric; it is dissipative and not part of the mass matrix.  Spannan's factor 1/1.4 in
+  (5.14) belongs to his contact-force element with a separate ball spin; in the one-DOF rolling
+  model the offset torque acts on the spin directly and the factor does not appear.  The sign
+  is regularised as tanh(R ph'/u*) with u* = ``rolling_regularization_speed`` so that the
+  fixed-step integrators do not chatter; with u* = 1 mm/s the extra damping slope mu_r N / u*
+  stays well below the race drag of every shipped scene.
+* The rotor row carries no reaction of the race drag or the rolling resistance: both act
+  between ball and rotor and do virtual work only on the relative coordinate ph_i.
+
+Solution: the ball block of the matrix is diagonal, so the balls are eliminated with a Schur
+complement and only a 2x2 (prescribed speed) or 3x3 (rotor spin as a DOF) system is solved.
+Kernels assume valid input; validation happens in :mod:`abb_gym.physics.scene`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .scene import Scene
+
+# scalar parameter vector layout
+P_MASS, P_KX, P_KY, P_CX, P_CY, P_U0, P_J, P_BETA0, P_R, P_E, P_GAM, P_UREG, P_ROLL, P_ECC = \
+    range(14)
+N_PARAMS = 14
+# per-ball parameter matrix columns
+B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
+N_BALL_PARAMS = 5
+# drive row layout: one row per segment of piecewise-constant drive law
+(D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM) = range(10)
+N_DRIVE = 10
+MODE_PRESCRIBED = 0.0
+MODE_MOTOR = 1.0
+
+
+def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Scene -> (scalar parameter vector, per-ball parameter matrix) for the kernels."""
+    p = np.zeros(N_PARAMS)
+    p[P_MASS] = scene.total_mass
+    p[P_KX], p[P_KY] = scene.support_stiffness_x, scene.support_stiffness_y
+    p[P_CX], p[P_CY] = scene.support_damping_x, scene.support_damping_y
+    p[P_U0] = scene.imbalance
+    p[P_J] = scene.rotor_polar_inertia
+    p[P_BETA0] = scene.bearing_drag
+    p[P_R] = scene.race_radius
+    p[P_E] = scene.race_eccentricity
+    p[P_GAM] = scene.race_eccentricity_angle
+    p[P_UREG] = scene.rolling_regularization_speed
+    p[P_ROLL] = 1.0 if "rolling_resistance" in scene.effects else 0.0
+    p[P_ECC] = 1.0 if "race_eccentricity" in scene.effects else 0.0
+    a = scene.arrays()
+    b = np.zeros((scene.ball_count, N_BALL_PARAMS))
+    b[:, B_MASS] = a["ball_mass"]
+    b[:, B_RADIUS] = a["ball_radius"]
+    b[:, B_INERTIA] = a["ball_inertia_factor"] * a["ball_mass"] * a["ball_radius"] ** 2
+    b[:, B_BETA] = a["ball_drag"] * scene.race_radius ** 2
+    b[:, B_MUR] = a["ball_rolling_resistance"] / a["ball_radius"]
+    return p, b
+
+
+@njit(cache=True, inline="always")
+def _ball_coupling(th, ph, p, b, i):
+    """Mass-matrix entries of ball i: (col_x, col_y, c_i, I_i, spin-inertia share of Jt)."""
+    m = b[i, B_MASS]
+    r = b[i, B_RADIUS]
+    ji = b[i, B_INERTIA]
+    big_r = p[P_R]
+    mr = m * big_r
+    s = math.sin(th + ph)
+    c = math.cos(th + ph)
+    ci = mr * big_r - ji * big_r / r
+    jt = ji + mr * big_r
+    if p[P_ECC] != 0.0:
+        e = p[P_E]
+        cg = math.cos(p[P_GAM] - ph)
+        ci += e * mr * cg
+        jt += m * e * e + 2.0 * e * mr * cg
+    return -mr * s, mr * c, ci, ji * big_r * big_r / (r * r) + mr * big_r, jt
+
+
+@njit(cache=True)
+def mass_matrix(q, p, b):
+    """Symmetric mass matrix M(q) of size 3 + n (kinetic energy T = q'^T M q' / 2)."""
+    n = b.shape[0]
+    nq = 3 + n
+    th = q[2]
+    mm = np.zeros((nq, nq))
+    total = p[P_MASS]
+    sx = p[P_U0] * math.sin(th)
+    cy = p[P_U0] * math.cos(th)
+    jt = p[P_J]
+    for i in range(n):
+        if p[P_ECC] != 0.0:
+            sx += p[P_E] * b[i, B_MASS] * math.sin(th + p[P_GAM])
+            cy += p[P_E] * b[i, B_MASS] * math.cos(th + p[P_GAM])
+        colx, coly, ci, ii, jti = _ball_coupling(th, q[3 + i], p, b, i)
+        sx -= colx
+        cy += coly
+        jt += jti
+        k = 3 + i
+        mm[0, k] = mm[k, 0] = colx
+        mm[1, k] = mm[k, 1] = coly
+        mm[2, k] = mm[k, 2] = ci
+        mm[k, k] = ii
+    mm[0, 0] = total
+    mm[1, 1] = total
+    mm[2, 2] = jt
+    mm[0, 2] = mm[2, 0] = -sx
+    mm[1, 2] = mm[2, 1] = cy
+    return mm
+
+
+@njit(cache=True)
+def potential_energy(q, p):
+    """Support-spring energy [J]."""
+    return 0.5 * (p[P_KX] * q[0] * q[0] + p[P_KY] * q[1] * q[1])
+
+
+@njit(cache=True)
+def drive_state(t, s, d, nq):
+    """(rotor angle, rotor speed, prescribed acceleration or NaN, motor torque) at time t."""
+    tau = t - d[D_T0]
+    if d[D_MODE] == MODE_PRESCRIBED:
+        alpha = d[D_ALPHA]
+        w = d[D_W0] + alpha * tau
+        th = d[D_TH0] + d[D_W0] * tau + 0.5 * alpha * tau * tau
+        return th, w, alpha, 0.0
+    th = s[2]
+    w = s[nq + 2]
+    torque = d[D_TORQUE] + d[D_GAIN] * (d[D_TW0] + d[D_TALPHA] * tau - w)
+    lim = d[D_TLIM]
+    if torque > lim:
+        torque = lim
+    elif torque < -lim:
+        torque = -lim
+    return th, w, np.nan, torque
+
+
+@njit(cache=True)
+def accelerations(t, s, p, b, d, qdd, work):
+    """Fill ``qdd`` (length 3 + n) with the generalised accelerations at state ``s``.
+
+    ``d`` is the drive row of the current segment, ``work`` an (n, 4) scratch array.  With a
+    prescribed drive, th and th' are taken from the drive law (the state's entries are ignored)
+    and qdd[2] is the prescribed acceleration.  Returns the motor torque [N m] (0 if prescribed).
+    """
+    n = b.shape[0]
+    nq = 3 + n
+    x, y = s[0], s[1]
+    vx, vy = s[nq], s[nq + 1]
+    th, w, alpha, torque = drive_state(t, s, d, nq)
+    prescribed = d[D_MODE] == MODE_PRESCRIBED
+    ecc = p[P_ECC] != 0.0
+    roll = p[P_ROLL] != 0.0
+    big_r = p[P_R]
+    e = p[P_E]
+    gam = p[P_GAM]
+    w2 = w * w
+    sth = math.sin(th)
+    cth = math.cos(th)
+    total = p[P_MASS]
+    sx = p[P_U0] * sth
+    cy = p[P_U0] * cth
+    fx = -p[P_CX] * vx - p[P_KX] * x + p[P_U0] * cth * w2
+    fy = -p[P_CY] * vy - p[P_KY] * y + p[P_U0] * sth * w2
+    fth = torque - p[P_BETA0] * w
+    jt = p[P_J]
+    if ecc:
+        stg = math.sin(th + gam)
+        ctg = math.cos(th + gam)
+    else:
+        stg = 0.0
+        ctg = 0.0
+    for i in range(n):
+        m = b[i, B_MASS]
+        ph = s[3 + i]
+        dph = s[nq + 3 + i]
+        mr = m * big_r
+        sp = math.sin(th + ph)
+        cp = math.cos(th + ph)
+        colx, coly, ci, ii, jti = _ball_coupling(th, ph, p, b, i)
+        sx -= colx
+        cy += coly
+        jt += jti
+        wrel2 = (w + dph) * (w + dph)
+        fx += mr * wrel2 * cp
+        fy += mr * wrel2 * sp
+        fi = -b[i, B_BETA] * dph
+        bx = colx
+        by = coly
+        bth = ci
+        if ecc:
+            sgp = math.sin(gam - ph)
+            cgp = math.cos(gam - ph)
+            sx += e * m * stg
+            cy += e * m * ctg
+            fx += e * m * ctg * w2
+            fy += e * m * stg * w2
+            fth -= e * mr * sgp * dph * (2.0 * w + dph)
+            fi += mr * e * sgp * w2
+        if roll:
+            kr = b[i, B_MUR] * mr * math.tanh(big_r * dph / p[P_UREG])
+            fi -= kr * big_r * wrel2
+            bx -= kr * cp
+            by -= kr * sp
+            if ecc:
+                fi -= kr * e * w2 * cgp
+                bth += kr * e * sgp
+        work[i, 0] = bx
+        work[i, 1] = by
+        work[i, 2] = bth
+        work[i, 3] = fi
+        work[i, 4] = ii
+        work[i, 5] = colx
+        work[i, 6] = coly
+        work[i, 7] = ci
+    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] and its Schur complement
+    a00 = total
+    a01 = 0.0
+    a10 = 0.0
+    a11 = total
+    a02 = -sx
+    a12 = cy
+    a20 = -sx
+    a21 = cy
+    a22 = jt
+    if prescribed:
+        fx -= a02 * alpha
+        fy -= a12 * alpha
+    for i in range(n):
+        bx, by, bth, fi, ii = work[i, 0], work[i, 1], work[i, 2], work[i, 3], work[i, 4]
+        colx, coly, ci = work[i, 5], work[i, 6], work[i, 7]
+        if prescribed:
+            fi -= bth * alpha
+        inv = 1.0 / ii
+        a00 -= colx * bx * inv
+        a01 -= colx * by * inv
+        a10 -= coly * bx * inv
+        a11 -= coly * by * inv
+        fx -= colx * fi * inv
+        fy -= coly * fi * inv
+        if not prescribed:
+            a02 -= colx * bth * inv
+            a12 -= coly * bth * inv
+            a20 -= ci * bx * inv
+            a21 -= ci * by * inv
+            a22 -= ci * bth * inv
+            fth -= ci * fi * inv
+    if prescribed:
+        det = a00 * a11 - a01 * a10
+        ax = (fx * a11 - a01 * fy) / det
+        ay = (a00 * fy - a10 * fx) / det
+        ath = alpha
+    else:
+        c00 = a11 * a22 - a12 * a21
+        c01 = a12 * a20 - a10 * a22
+        c02 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
+        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
+        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
+    qdd[0] = ax
+    qdd[1] = ay
+    qdd[2] = ath
+    for i in range(n):
+        qdd[3 + i] = (work[i, 3] - work[i, 0] * ax - work[i, 1] * ay - work[i, 2] * ath) \
+            / work[i, 4]
+    return torque
+
+
+WORK_COLUMNS = 8
+
+
+def make_work(n_balls: int) -> np.ndarray:
+    """Scratch array for :func:`accelerations`."""
+    return np.zeros((n_balls, WORK_COLUMNS))
+
+
+@njit(cache=True)
+def state_derivative(t, s, p, b, d, ds, qdd, work):
+    """ds/dt for the first-order state; with a prescribed drive the th-rows follow the drive."""
+    nq = 3 + b.shape[0]
+    accelerations(t, s, p, b, d, qdd, work)
+    for k in range(nq):
+        ds[k] = s[nq + k]
+        ds[nq + k] = qdd[k]
+    if d[D_MODE] == MODE_PRESCRIBED:
+        tau = t - d[D_T0]
+        ds[2] = d[D_W0] + d[D_ALPHA] * tau
+
+
+@njit(cache=True)
+def total_energy(s, p, b):
+    """Kinetic plus support-spring energy [J] of state ``s`` (rotor spin included)."""
+    nq = 3 + b.shape[0]
+    q = s[:nq]
+    v = s[nq:]
+    mm = mass_matrix(q, p, b)
+    return 0.5 * v @ (mm @ v) + potential_energy(q, p)
