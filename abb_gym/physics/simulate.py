@@ -93,7 +93,7 @@ class Trajectory:
     t: np.ndarray
     states: np.ndarray
     method: str
-    step: float | None
+    step: float | None  # largest RK4 step taken [s] (None for solve_ivp methods)
     wall_time: float
     work: int
     motor_torque: np.ndarray | None = None
@@ -237,6 +237,9 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0 [s] (got {dt})")
         status, t_fail, bad, work = integ.rk4_run(s0, t_out, seg_t, seg_d, p, b, float(dt), out)
+        # the step actually taken: an output interval is split into equal steps <= dt
+        interval = t_out[1] - t_out[0]
+        dt = interval / math.ceil(interval / dt - 1e-9)
     else:
         if atol is None:
             nq = 3 + scene.ball_count

@@ -1,0 +1,35 @@
+# Two commands do everything on a fresh machine:
+#   make demo   - create .venv, install abb-gym, run the main demonstration (figures in out/demo)
+#   make test   - create .venv, install abb-gym with test extras, run the default test suite
+# Long runs (training, sweeps) are opt-in: make test-slow, make bench.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+# torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
+PIP_INSTALL := $(PIP) install -q -c constraints.txt
+
+.PHONY: setup demo test test-slow bench clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP_INSTALL) -e ".[test]"
+	touch $@
+
+demo: setup
+	$(PY) -m abb_gym.cli demo --out out/demo
+
+test: setup
+	$(PY) -m pytest -q
+
+test-slow: setup
+	$(PY) -m pytest -q --runslow
+
+bench: setup
+	$(PY) -m abb_gym.cli bench speed
+
+clean:
+	rm -rf $(VENV) out

@@ -1,0 +1,35 @@
+"""The ``abb-gym`` command line.
+
+Each subcommand lives in its own module of this package and defines ``register(subparsers)``,
+which adds its parser and sets ``func`` to the function that runs it.  To add a subcommand,
+write the module and list it in ``SUBCOMMANDS``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS = [
+    "abb_gym.cli.simulate",
+    "abb_gym.cli.demo",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="abb-gym", description="Automatic ball balancer simulator and Gymnasium suite")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in SUBCOMMANDS:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ValueError as exc:  # bad input: one clear line, no traceback
+        print(f"abb-gym {args.command}: error: {exc}", file=sys.stderr)
+        return 2

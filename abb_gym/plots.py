@@ -1,0 +1,74 @@
+"""Figures for people who would rather look than read (matplotlib, written as PNG)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .physics.simulate import Trajectory  # noqa: E402
+
+__all__ = ["plot_runup", "plot_runup_comparison"]
+
+
+def _draw_runup(axes, tr: Trajectory, label: str | None, colour, critical: bool) -> None:
+    ax_speed, ax_balls = axes
+    ax_whirl = ax_speed._abb_twin  # created once per figure
+    ax_speed.plot(tr.t, tr.rotor_speed, color=colour, ls="--", lw=1.0)
+    ax_whirl.plot(tr.t, tr.whirl_ratio, color=colour, lw=1.2, label=label)
+    for i in range(tr.n_balls):
+        ax_balls.plot(tr.t, np.degrees(tr.ball_angles[:, i]), color=colour, lw=1.2,
+                      ls=("-", ":", "-.", (0, (5, 1)), (0, (3, 1, 1, 1)))[i % 5],
+                      label=f"{label + ': ' if label else ''}ball {i + 1}")
+    if critical:
+        for ax in (ax_speed, ax_balls):
+            crossing = np.nonzero(tr.rotor_speed >= tr.scene.critical_speed)[0]
+            if crossing.size:
+                ax.axvline(tr.t[crossing[0]], color="0.6", lw=0.8, ls=":")
+
+
+def _figure(title: str):
+    fig, (ax_speed, ax_balls) = plt.subplots(2, 1, figsize=(8, 7), sharex=True,
+                                             constrained_layout=True)
+    ax_speed._abb_twin = ax_speed.twinx()
+    ax_speed.set_ylabel("rotor speed dpsi/dt [rad/s] (dashed)")
+    ax_speed._abb_twin.set_ylabel("normalised whirl W_r / e [-] (solid)")
+    ax_speed.set_title("(a) rotation speed and whirl radius")
+    ax_balls.set_title("(b) ball angles relative to the rotor, from the imbalance")
+    ax_balls.set_ylabel("ball angle theta_b [deg]")
+    ax_balls.set_xlabel("time t [s]")
+    ax_balls.axhline(-180.0, color="k", lw=0.6)
+    ax_balls.axhline(-540.0, color="k", lw=0.3)
+    fig.suptitle(title)
+    return fig, (ax_speed, ax_balls)
+
+
+def plot_runup(tr: Trajectory, path: str | Path, title: str | None = None) -> Path:
+    """Thesis-style time histories of one run (Yoshida Figs. 4.x (a) and (c)) to a PNG."""
+    return plot_runup_comparison({"": tr}, path, title)
+
+
+def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
+                          title: str | None = None) -> Path:
+    """Several runs of one scene on the same axes (e.g. policy versus baseline) to a PNG."""
+    runs = dict(runs)
+    first = next(iter(runs.values()))
+    fig, axes = _figure(title or f"{first.scene.name}: run-up")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, (label, tr) in enumerate(runs.items()):
+        _draw_runup(axes, tr, label or None, colours[k % len(colours)], critical=(k == 0))
+    if any(runs):
+        axes[0]._abb_twin.legend(loc="upper right", fontsize=8)
+    axes[1].legend(loc="lower left", fontsize=7, ncol=2)
+    lo = min(np.degrees(tr.ball_angles).min() for tr in runs.values())
+    hi = max(np.degrees(tr.ball_angles).max() for tr in runs.values())
+    axes[1].set_ylim(min(-200.0, lo - 20), max(30.0, hi + 20))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,250 @@
+"""The equations of motion against independent derivations.
+
+* The mass matrix and the full equations of motion are compared with a Lagrangian built from the
+  kinematics alone (positions of the rotor mass centre and the balls, Spannan eq. 4.9, plus the
+  spins), differentiated numerically.  That shares no formula with the kernel.
+* Yoshida's equations (2-9)-(2-11) are written out literally and must agree with the kernel.
+* Energy is conserved without damping when the rotor spins freely.
+"""
+import numpy as np
+import pytest
+
+import abb_gym
+from abb_gym.physics import model as mdl
+from abb_gym.physics.drives import MotorDrive, SpeedProfile
+from abb_gym.physics.scene import load_scene
+from abb_gym.physics.simulate import simulate
+
+
+def random_scene(rng, n_balls, eccentric=True, orthotropic=True):
+    base = load_scene("yoshida_odd")
+    return base.replace(
+        ball_count=n_balls,
+        ball_mass=list(rng.uniform(0.5e-3, 3e-3, n_balls)),
+        ball_radius=list(rng.uniform(0.5e-3, 2e-3, n_balls)),
+        ball_inertia_factor=list(rng.uniform(0.0, 0.5, n_balls)),
+        ball_drag=list(rng.uniform(0.1, 2.0, n_balls)),
+        ball_rolling_resistance=0.0,
+        ball_angles0=list(rng.uniform(-3, 3, n_balls)),
+        race_eccentricity=rng.uniform(1e-4, 1e-3) if eccentric else 0.0,
+        race_eccentricity_angle=rng.uniform(-3, 3),
+        support_stiffness_x=1000.0,
+        support_stiffness_y=1500.0 if orthotropic else 1000.0,
+        support_damping_x=0.2,
+        support_damping_y=0.35 if orthotropic else 0.2,
+        bearing_drag=1e-6,
+    )
+
+
+class Kinematics:
+    """Point masses and spins of the model, from positions only (no kernel formulas)."""
+
+    def __init__(self, scene):
+        self.s = scene
+        a = scene.arrays()
+        self.m = a["ball_mass"]
+        self.r = a["ball_radius"]
+        self.j = a["ball_inertia_factor"] * self.m * self.r ** 2
+        self.n = scene.ball_count
+        # rotor as a rigid body: mass centre offset e along the rotor angle, polar inertia J
+        self.mr = scene.rotor_mass
+        self.e = scene.rotor_eccentricity
+        self.jc = scene.rotor_polar_inertia - self.mr * self.e ** 2
+
+    def positions(self, q):
+        x, y, th = q[0], q[1], q[2]
+        big_r, big_e, gam = self.s.race_radius, self.s.race_eccentricity, \
+            self.s.race_eccentricity_angle
+        pts = [np.array([x + self.e * np.cos(th), y + self.e * np.sin(th)])]
+        for i in range(self.n):
+            ph = q[3 + i]
+            pts.append(np.array([x + big_e * np.cos(th + gam) + big_r * np.cos(th + ph),
+                                 y + big_e * np.sin(th + gam) + big_r * np.sin(th + ph)]))
+        return pts
+
+    def masses(self):
+        return [self.mr] + list(self.m)
+
+    def spin_rows(self):
+        """(inertia, row of d(spin)/dq') for the rotor and each ball (kappa = th - R/r ph)."""
+        nq = 3 + self.n
+        rows = []
+        row = np.zeros(nq)
+        row[2] = 1.0
+        rows.append((self.jc, row))
+        for i in range(self.n):
+            row = np.zeros(nq)
+            row[2] = 1.0
+            row[3 + i] = -self.s.race_radius / self.r[i]
+            rows.append((self.j[i], row))
+        return rows
+
+    def jacobians(self, q, h=1e-6):
+        nq = len(q)
+        jacs = [np.zeros((2, nq)) for _ in self.masses()]
+        for k in range(nq):
+            dq = np.zeros(nq)
+            dq[k] = h
+            plus, minus = self.positions(q + dq), self.positions(q - dq)
+            for jac, p, m in zip(jacs, plus, minus):
+                jac[:, k] = (p - m) / (2 * h)
+        return jacs
+
+    def mass_matrix(self, q):
+        mm = sum(m * jac.T @ jac for m, jac in zip(self.masses(), self.jacobians(q)))
+        for inertia, row in self.spin_rows():
+            mm = mm + inertia * np.outer(row, row)
+        return mm
+
+    def convective(self, q, v):
+        """sum_k m_k J_k^T (d^2 p_k / dt^2 at q'' = 0), by central differences along v."""
+        h = 1e-3 / np.abs(v).max()  # every angle moves 1 mrad at most: truncation ~1e-7
+        plus, mid, minus = self.positions(q + h * v), self.positions(q), self.positions(q - h * v)
+        acc = [(p - 2 * c + m) / h ** 2 for p, c, m in zip(plus, mid, minus)]
+        return sum(m * jac.T @ a for m, jac, a in zip(self.masses(), self.jacobians(q), acc))
+
+
+def random_state(rng, scene):
+    nq = 3 + scene.ball_count
+    q = np.concatenate([rng.uniform(-2e-3, 2e-3, 2), rng.uniform(-np.pi, np.pi, nq - 2)])
+    v = np.concatenate([rng.uniform(-0.3, 0.3, 2), [rng.uniform(20, 150)],
+                        rng.uniform(-20, 20, nq - 3)])
+    return q, v
+
+
+@pytest.mark.parametrize("n_balls", [1, 2, 3, 5])
+def test_mass_matrix_symmetric_positive_definite_and_matches_kinematics(n_balls):
+    rng = np.random.default_rng(n_balls)
+    for _ in range(20):
+        scene = random_scene(rng, n_balls)
+        p, b = mdl.pack_parameters(scene)
+        q, _ = random_state(rng, scene)
+        mm = mdl.mass_matrix(q, p, b)
+        assert np.array_equal(mm, mm.T)
+        assert np.linalg.eigvalsh(mm).min() > 0
+        ref = Kinematics(scene).mass_matrix(q)
+        np.testing.assert_allclose(mm, ref, rtol=1e-7, atol=1e-12 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("n_balls,eccentric,orthotropic", [(1, True, True), (2, False, False),
+                                                           (3, True, False), (4, True, True)])
+def test_accelerations_match_lagrange_equations_from_kinematics(n_balls, eccentric, orthotropic):
+    """M(q) q'' + conv(q, q') = Q - dV/dq, with M and conv derived from positions only."""
+    rng = np.random.default_rng(10 + n_balls)
+    for _ in range(10):
+        scene = random_scene(rng, n_balls, eccentric, orthotropic)
+        p, b = mdl.pack_parameters(scene)
+        q, v = random_state(rng, scene)
+        kin = Kinematics(scene)
+        torque = 1e-3
+        beta = scene.arrays()["ball_drag"] * scene.race_radius ** 2
+        gen_force = np.concatenate([
+            [-scene.support_damping_x * v[0] - scene.support_stiffness_x * q[0],
+             -scene.support_damping_y * v[1] - scene.support_stiffness_y * q[1],
+             torque - scene.bearing_drag * v[2]],
+            -beta * v[3:]])
+        ref = np.linalg.solve(kin.mass_matrix(q), gen_force - kin.convective(q, v))
+        d = np.zeros(mdl.N_DRIVE)
+        d[mdl.D_MODE] = mdl.MODE_MOTOR
+        d[mdl.D_TORQUE] = torque
+        d[mdl.D_TLIM] = 1.0
+        qdd = np.empty(len(q))
+        mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(n_balls))
+        np.testing.assert_allclose(qdd, ref, rtol=2e-5, atol=2e-6 * np.abs(ref).max())
+
+
+def yoshida_accelerations(scene, q, v, psi, dpsi, ddpsi):
+    """Yoshida (2014) eqs. (2-9)-(2-11) written out literally (two balls, sign())."""
+    m = scene.ball_mass[0]
+    a = scene.ball_radius[0]
+    inertia = scene.ball_inertia_factor[0] * m * a ** 2
+    big_r, k, c, cb = scene.race_radius, scene.support_stiffness_x, scene.support_damping_x, \
+        scene.ball_drag[0]
+    beta_b = scene.ball_rolling_resistance[0]
+    big_m = scene.total_mass
+    m0e = scene.imbalance
+    x, y = q[0], q[1]
+    dx, dy = v[0], v[1]
+    psis = psi + q[3:5]
+    dpsis = dpsi + v[3:5]
+    # unknowns: x'', y'', psi_1'', psi_2''
+    mat = np.zeros((4, 4))
+    rhs = np.zeros(4)
+    mat[0, 0] = big_m
+    rhs[0] = -c * dx - k * x + m0e * (ddpsi * np.sin(psi) + dpsi ** 2 * np.cos(psi))
+    mat[1, 1] = big_m
+    rhs[1] = -c * dy - k * y + m0e * (-ddpsi * np.cos(psi) + dpsi ** 2 * np.sin(psi))
+    for i in range(2):
+        mat[0, 2 + i] = -m * big_r * np.sin(psis[i])
+        rhs[0] += m * big_r * dpsis[i] ** 2 * np.cos(psis[i])
+        mat[1, 2 + i] = m * big_r * np.cos(psis[i])
+        rhs[1] += m * big_r * dpsis[i] ** 2 * np.sin(psis[i])
+        sgn = np.sign(dpsis[i] - dpsi)
+        # (m + I/a^2) R psi_i'' - m (x'' sin - y'' cos) + c_b R (psi_i' - psi')
+        #   = -m (beta_b/a) (R psi_i'^2 - x'' cos - y'' sin) sgn + ((R + a)/a^2) I psi''
+        row = 2 + i
+        mat[row, 2 + i] = (m + inertia / a ** 2) * big_r
+        mat[row, 0] = -m * np.sin(psis[i]) - m * beta_b / a * sgn * np.cos(psis[i])
+        mat[row, 1] = m * np.cos(psis[i]) - m * beta_b / a * sgn * np.sin(psis[i])
+        rhs[row] = (-cb * big_r * (dpsis[i] - dpsi)
+                    - m * beta_b / a * big_r * dpsis[i] ** 2 * sgn
+                    + (big_r + a) / a ** 2 * inertia * ddpsi)
+    sol = np.linalg.solve(mat, rhs)
+    return np.array([sol[0], sol[1], ddpsi, sol[2] - ddpsi, sol[3] - ddpsi])
+
+
+def test_yoshida_equations_are_a_special_case():
+    # a tiny regularisation speed turns tanh back into Yoshida's sign() for these ball speeds
+    scene = load_scene("yoshida_odd", rolling_regularization_speed=1e-9,
+                       ball_rolling_resistance=2e-5)
+    p, b = mdl.pack_parameters(scene)
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = np.concatenate([rng.uniform(-5e-3, 5e-3, 2), [0.0], rng.uniform(-7, 7, 2)])
+        v = np.concatenate([rng.uniform(-0.5, 0.5, 2), [0.0],
+                            rng.choice([-1, 1], 2) * rng.uniform(0.5, 30, 2)])
+        psi, dpsi, ddpsi = rng.uniform(0, 50), rng.uniform(0, 250), rng.uniform(-40, 40)
+        d = np.zeros(mdl.N_DRIVE)
+        d[mdl.D_TH0], d[mdl.D_W0], d[mdl.D_ALPHA] = psi, dpsi, ddpsi
+        qdd = np.empty(5)
+        mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(2))
+        ref = yoshida_accelerations(scene, q, v, psi, dpsi, ddpsi)
+        np.testing.assert_allclose(qdd, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+def test_energy_conserved_without_damping_free_rotor():
+    """Free-spinning rotor, no damping, no drive: the total energy is a constant of motion."""
+    rng = np.random.default_rng(7)
+    scene = random_scene(rng, 3).replace(
+        support_damping_x=0.0, support_damping_y=0.0, ball_drag=0.0, bearing_drag=0.0)
+    p, b = mdl.pack_parameters(scene)
+    drive = MotorDrive(torque=0.0, initial_speed=80.0)
+    kwargs = dict(ball_angles0=[0.3, 2.0, -1.0], ball_speeds0=[5.0, -3.0, 1.0],
+                  x0=(1e-3, -5e-4), v0=(0.02, 0.0), output_dt=0.01)
+    ref = simulate(scene, drive, 1.0, method="DOP853", rtol=1e-12, **kwargs)
+    energy = np.array([mdl.total_energy(s, p, b) for s in ref.states])
+    assert np.ptp(energy) / energy[0] < 1e-9
+    # the fixed-step path drifts less as the step shrinks (fourth order: about 16x per halving)
+    drift = []
+    for dt in (2e-3, 1e-3, 5e-4):
+        tr = simulate(scene, drive, 1.0, dt=dt, **kwargs)
+        e = np.array([mdl.total_energy(s, p, b) for s in tr.states])
+        drift.append(np.max(np.abs(e - e[0])) / e[0])
+    assert drift[0] < 1e-3
+    assert drift[1] < drift[0] / 8 and drift[2] < drift[1] / 8
+
+
+def test_prescribed_and_motor_paths_agree_when_the_motor_follows_the_profile():
+    """A fast speed loop (time constant J/gain = 0.1 ms) holding a constant speed reproduces
+    the prescribed-speed run: the two drive paths share the ball and rotor equations."""
+    scene = load_scene("yoshida_odd")
+    w = 150.0
+    gain = scene.rotor_polar_inertia / 1e-4
+    pres = simulate(scene, SpeedProfile.constant(w), 0.5, output_dt=0.01)
+    motor = simulate(scene, MotorDrive(speed_gain=gain, target=w, torque_limit=1.0,
+                                       initial_speed=w), 0.5, output_dt=0.01, dt=2e-5)
+    assert np.max(np.abs(motor.rotor_speed - w)) < 1e-3
+    assert np.max(np.abs(motor.motor_torque)) < 1.0  # never saturated
+    np.testing.assert_allclose(motor.whirl_radius, pres.whirl_radius, rtol=0,
+                               atol=2e-3 * pres.whirl_radius.max())
+    np.testing.assert_allclose(motor.ball_angles, pres.ball_angles, atol=1e-3)
