@@ -351,3 +351,32 @@ def total_energy(s, p, b):
     v = s[nq:]
     mm = mass_matrix(q, p, b)
     return 0.5 * v @ (mm @ v) + potential_energy(q, p)
+
+
+@njit(cache=True)
+def drag_rates(t, s, p, b, d, lam):
+    """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state size).
+
+    For ball i, lam[ph_i'] = (beta_i + d(rolling force)/d(ph_i')) / I_i: the race drag plus the
+    slope of the smoothed rolling resistance, mu_r m R^3 (th' + ph')^2 sech^2(R ph'/u*) / u*,
+    which grows with the rotor speed squared.  Every other entry is 0.  This is the stiff,
+    nearly diagonal part of the Jacobian (the coupling through the rotor, of relative size
+    m_i / M, is left out); the exponential integrator treats it exactly and the step-size rule
+    of the explicit methods bounds h * lam.
+    """
+    n = b.shape[0]
+    nq = 3 + n
+    th, w, alpha, torque = drive_state(t, s, d, nq)
+    for j in range(2 * nq):
+        lam[j] = 0.0
+    big_r = p[P_R]
+    for i in range(n):
+        m = b[i, B_MASS]
+        r = b[i, B_RADIUS]
+        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r
+        rate = b[i, B_BETA]
+        if p[P_ROLL] != 0.0:
+            dph = s[nq + 3 + i]
+            ch = math.cosh(big_r * dph / p[P_UREG])
+            rate += b[i, B_MUR] * m * big_r ** 3 * (w + dph) ** 2 / (ch * ch * p[P_UREG])
+        lam[nq + 3 + i] = rate / ii

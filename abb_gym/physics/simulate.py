@@ -14,10 +14,12 @@ from . import model as mdl
 from .drives import MotorDrive, SpeedProfile
 from .scene import Scene, load_scene
 
-__all__ = ["simulate", "Trajectory", "SimulationError", "default_step", "initial_state",
-           "METHODS"]
+__all__ = ["simulate", "Trajectory", "SimulationError", "default_step", "stiff_rate",
+           "initial_state", "state_scale", "METHODS"]
 
-METHODS = ("rk4", "DOP853", "Radau", "RK45", "LSODA", "BDF")
+COMPILED_METHODS = tuple(integ.METHOD_IDS)
+SCIPY_METHODS = ("DOP853", "Radau", "RK45", "LSODA", "BDF")
+METHODS = COMPILED_METHODS + SCIPY_METHODS
 
 
 class SimulationError(FloatingPointError):
@@ -36,22 +38,40 @@ def state_names(n_balls: int) -> list[str]:
     return q + v
 
 
-def default_step(scene: Scene, max_speed: float) -> float:
-    """Default RK4 step [s]: a fixed fraction of the shortest time scale of the run.
+def stiff_rate(scene: Scene, max_speed: float) -> float:
+    """Largest relaxation rate of a ball's relative motion at rotor speed ``max_speed`` [1/s].
 
-    Time scales: the higher critical speed, the highest rotor speed ``max_speed`` [rad/s], and
-    the relaxation rate of the race drag, rate = c_b / (m (1 + I/(m r^2))).  The step turns the
-    fastest rotation by at most 0.4 rad and keeps h * rate <= 1.5, inside RK4's real-axis
-    stability limit of 2.79.  On the Yoshida run-up this is 1.7 ms and stays within 0.1 % of the
-    DOP853 peak whirl and 0.1 deg of the ball angles (``tests/test_validation.py`` checks the
-    stated 1 % and 1 deg).  The output interval also caps the step.
+    rate = (c_b + c_roll) / (m (1 + I/(m r^2))) with the slope of the smoothed rolling
+    resistance c_roll = (beta_b / r) m R Omega^2 / u* (:func:`model.drag_rates` at rest
+    relative to the rotor).  The first term is set by the race drag, the second grows with the
+    rotor speed: together they bound the step of the explicit methods (RK4: h * rate < 2.79).
     """
-    a = scene.arrays()
-    rate = float(np.max(a["ball_drag"] / (a["ball_mass"] * (1.0 + a["ball_inertia_factor"]))))
+    p, b = mdl.pack_parameters(scene)
+    nq = 3 + scene.ball_count
+    d = np.zeros(mdl.N_DRIVE)
+    d[mdl.D_W0] = max_speed
+    lam = np.zeros(2 * nq)
+    mdl.drag_rates(0.0, np.zeros(2 * nq), p, b, d, lam)
+    return float(lam.max())
+
+
+def default_step(scene: Scene, max_speed: float, method: str = "rk4") -> float:
+    """Default step [s] of the fixed-step methods for a run reaching ``max_speed`` [rad/s].
+
+    The step turns the fastest rotation (the higher critical speed or ``max_speed``) by at most
+    0.4 rad.  For the explicit RK4 it also keeps h * :func:`stiff_rate` <= 1.5, inside RK4's
+    real-axis stability limit of 2.79; "etdrk4" treats that rate exactly and the L-stable
+    "ros2" is stable at any step, so neither needs the bound.  On the
+    Yoshida run-up RK4 takes 1.3 ms steps and stays within 0.1 % of the DOP853 peak whirl and
+    0.1 deg of the ball angles (``tests/test_validation.py`` checks the stated 1 % and 1 deg).
+    The output interval also caps the step.
+    """
     omega = max(scene.critical_speeds[1], abs(max_speed), 1e-9)
     h = 0.4 / omega
-    if rate > 0:
-        h = min(h, 1.5 / rate)
+    if method == "rk4":
+        rate = stiff_rate(scene, max_speed)
+        if rate > 0:
+            h = min(h, 1.5 / rate)
     return h
 
 
@@ -190,10 +210,36 @@ def _output_times(t_end: float, output_dt: float | None) -> np.ndarray:
     return np.linspace(0.0, t_end, n + 1)
 
 
+def drive_max_speed(drive: SpeedProfile | MotorDrive, t_end: float) -> float:
+    """Largest rotor speed [rad/s] the drive asks for on [0, t_end] (a motor: its target)."""
+    if isinstance(drive, SpeedProfile):
+        return drive.max_speed(t_end)
+    target = drive.target.max_speed(t_end) if isinstance(drive.target, SpeedProfile) \
+        else abs(float(drive.target))
+    return max(abs(drive.initial_speed), target)
+
+
+def is_conservative(scene: Scene, drive) -> bool:
+    """No damping anywhere and a free rotor: the total energy must stay constant."""
+    return (isinstance(drive, MotorDrive) and drive.torque == 0 and drive.speed_gain == 0
+            and scene.support_damping_x == 0 and scene.support_damping_y == 0
+            and scene.bearing_drag == 0 and not any(scene.ball_drag)
+            and not any(scene.ball_rolling_resistance))
+
+
+def state_scale(scene: Scene) -> np.ndarray:
+    """Typical magnitude of each state entry (lengths: the reference length; angles: 1)."""
+    nq = 3 + scene.ball_count
+    scale = np.ones(2 * nq)
+    scale[[0, 1, nq, nq + 1]] = scene.reference_length
+    return scale
+
+
 def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float, *,
              ball_angles0=None, ball_speeds0=None, x0=(0.0, 0.0), v0=(0.0, 0.0),
              method: str = "rk4", dt: float | None = None, output_dt: float | None = None,
-             rtol: float = 1e-10, atol: float | None = None) -> Trajectory:
+             rtol: float | None = None, atol: float | None = None,
+             energy_tolerance: float = 1e-3) -> Trajectory:
     """Simulate a run of ``scene`` under ``drive`` from t = 0 to ``t_end`` [s].
 
     Parameters
@@ -204,14 +250,20 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
     ball_angles0, ball_speeds0 : initial ball angles [rad] (default: the scene's) and relative
         speeds [rad/s] (default 0)
     x0, v0 : initial deflection [m] and velocity [m/s] of the rotor centre
-    method : "rk4" (compiled fixed step) or a ``solve_ivp`` method ("DOP853", "Radau", ...)
-    dt : RK4 step [s]; default :func:`default_step`
-    output_dt : sampling interval of the result [s]; default 1 ms
-    rtol, atol : tolerances of the ``solve_ivp`` methods (atol default 1e-10 x the state scale)
+    method : compiled "rk4" (fixed step, default), "dopri5" (adaptive 5(4)), "ros2" (fixed
+        step, L-stable Rosenbrock for stiff drag), or a ``solve_ivp`` method ("DOP853",
+        "Radau", "RK45", "LSODA", "BDF") through the same compiled right-hand side
+    dt : step of "rk4"/"ros2", first trial step of "dopri5" [s]; default :func:`default_step`
+    output_dt : sampling interval of the result [s]; default 1 ms (it also caps the step)
+    rtol, atol : tolerances of "dopri5" (default 1e-6) and of ``solve_ivp`` (default 1e-10);
+        atol defaults to rtol x the state scale (reference length for x, y; 1 for angles)
+    energy_tolerance : in a conservative run (no damping, free rotor) a relative growth of the
+        total energy beyond this raises :class:`SimulationError`
 
     Raises
     ------
-    ValueError for bad input; :class:`SimulationError` if the state becomes non-finite.
+    ValueError for bad input; :class:`SimulationError` if the state becomes non-finite, the
+    adaptive step underflows, or an undamped run gains energy.
     """
     scene = load_scene(scene) if not isinstance(scene, Scene) else scene
     if not isinstance(drive, (SpeedProfile, MotorDrive)):
@@ -221,41 +273,54 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         raise ValueError(f"t_end must be > 0 [s] (got {t_end})")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS} (got {method!r})")
+    if rtol is None:
+        rtol = 1e-6 if method in COMPILED_METHODS else 1e-10
+    if not (math.isfinite(rtol) and rtol > 0):
+        raise ValueError(f"rtol must be > 0 (got {rtol})")
     s0 = initial_state(scene, drive, ball_angles0, ball_speeds0, x0, v0)
     t_out = _output_times(t_end, output_dt)
     seg_t, seg_d = drive.segment_table(t_end, scene)
     p, b = mdl.pack_parameters(scene)
     out = np.empty((len(t_out), len(s0)))
+    atol_arr = rtol * state_scale(scene) if atol is None else np.broadcast_to(
+        np.asarray(atol, float), s0.shape).copy()
     start = time.perf_counter()
-    if method == "rk4":
+    if method in COMPILED_METHODS:
         if dt is None:
-            max_speed = drive.max_speed(t_end) if isinstance(drive, SpeedProfile) else \
-                max(abs(drive.initial_speed), *(
-                    [drive.target.max_speed(t_end)] if isinstance(drive.target, SpeedProfile)
-                    else [abs(float(drive.target))]), 1.0)
-            dt = default_step(scene, max_speed)
+            dt = default_step(scene, drive_max_speed(drive, t_end), method)
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0 [s] (got {dt})")
-        status, t_fail, bad, work = integ.rk4_run(s0, t_out, seg_t, seg_d, p, b, float(dt), out)
-        # the step actually taken: an output interval is split into equal steps <= dt
-        interval = t_out[1] - t_out[0]
-        dt = interval / math.ceil(interval / dt - 1e-9)
+        status, t_fail, bad, work = integ.run(integ.METHOD_IDS[method], s0, t_out, seg_t, seg_d,
+                                              p, b, float(dt), float(rtol), atol_arr, out)
+        if method in integ.FIXED_STEP:
+            # the step actually taken: an output interval is split into equal steps <= dt
+            interval = t_out[1] - t_out[0]
+            dt = interval / math.ceil(interval / dt - 1e-9)
+        else:
+            dt = None
     else:
-        if atol is None:
-            nq = 3 + scene.ball_count
-            scale = np.ones(2 * nq)
-            scale[[0, 1, nq, nq + 1]] = scene.reference_length
-            atol = 1e-10 * scale
         status, t_fail, bad, work = integ.scipy_run(s0, t_out, seg_t, seg_d, p, b, method,
-                                                    rtol, atol, out)
+                                                    rtol, atol_arr, out)
         dt = None
     wall = time.perf_counter() - start
     if status != integ.STATUS_OK:
         name = state_names(scene.ball_count)[bad]
+        what = ("the adaptive step fell below 1e-14 s" if status == integ.STATUS_STEP_UNDERFLOW
+                else f"the state became non-finite in {name!r}")
         raise SimulationError(
             f"simulation of scene {scene.name!r} with {method}"
-            f"{f' (dt = {dt:.3g} s)' if dt else ''} became non-finite at t = {t_fail:.6g} s "
-            f"in {name!r}; reduce the step or use a stiff method", t_fail, name)
+            f"{f' (dt = {dt:.3g} s)' if dt else ''}: {what} at t = {t_fail:.6g} s; "
+            f"reduce the step, or use 'etdrk4' (stiff drag) or 'ros2' (any stiffness)", t_fail, name)
+    if is_conservative(scene, drive):
+        energy = np.array([mdl.total_energy(s, p, b) for s in out])
+        growth = (energy - energy[0]) / max(abs(energy[0]), 1e-300)
+        k = int(np.argmax(growth))
+        if growth[k] > energy_tolerance:
+            raise SimulationError(
+                f"simulation of scene {scene.name!r} with {method}: the undamped run gained "
+                f"{growth[k]:.3g} of its energy by t = {t_out[k]:.6g} s (tolerance "
+                f"{energy_tolerance:g}); the integrator is unstable at this step",
+                float(t_out[k]), "energy")
     torque = None
     if isinstance(drive, MotorDrive):
         torque = drive.torque_at(t_out, out[:, 3 + scene.ball_count + 2], scene)

@@ -1,0 +1,138 @@
+"""Batched compiled RK4: many independent balancers advanced over the same output interval.
+
+The environments and parameter sweeps advance many copies of the model at once.  This module
+gives them the production integrator of :func:`abb_gym.physics.integrators.rk4_run` in a form
+that works one output interval at a time and over a batch:
+
+* :func:`advance` - one environment over one output interval ``[t0, t1]``.  It is the body of
+  ``rk4_run``'s interval loop, statement for statement: the same segment-pointer rule, the same
+  step count ``m = ceil((piece_end - t) / dt_max - 1e-9)`` and step ``h = (piece_end - t) / m``,
+  the same RK4 stage function (``integrators._rk4_step``, which calls
+  :func:`abb_gym.physics.model.state_derivative`), the same pinning of a prescribed rotor angle at
+  piece ends, and the same non-finite check after every step.  For the same output times the
+  states are therefore bit-identical to ``rk4_run`` (``tests/test_envs_batch.py`` checks this).
+  It also accumulates the time integral and the maximum of the whirl radius over the substeps.
+* :func:`run_batch` - ``rk4_run`` for ``N`` environments (own parameters, own drive tables,
+  shared output times), parallel over environments with ``numba.prange``.
+
+Array layout (``N`` environments, ``n`` balls, state length ``ns = 2 (3 + n)``):
+
+==========  =====================  ===========================================================
+name        shape                  meaning
+==========  =====================  ===========================================================
+s           (N, ns)                states, updated in place
+p           (N, N_PARAMS)          scalar parameters (:func:`model.pack_parameters`)
+b           (N, n, N_BALL_PARAMS)  per-ball parameters
+seg_d       (N, R, N_DRIVE)        drive rows; row ``j`` starts at ``seg_d[., j, D_T0]``
+nseg        (N,)                   number of valid rows per environment (<= R)
+ws          (N, 7, ns)             scratch: RK4 stages k1..k4, stage state, accelerations,
+                                   and a free row (``WS_BACKUP``) for the caller
+work        (N, n, WORK_COLUMNS)   scratch of :func:`model.accelerations`
+==========  =====================  ===========================================================
+
+Workspaces are passed in (never allocated per step) so that the batch loop does no allocation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from . import integrators as integ
+from . import model as mdl
+
+__all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS", "WS_BACKUP"]
+
+WS_ROWS = 7
+WS_BACKUP = 6  # row of ``ws`` that callers may use to keep the state at the interval start
+
+
+def make_workspace(n_envs: int, n_balls: int) -> tuple[np.ndarray, np.ndarray]:
+    """Scratch arrays ``(ws, work)`` for ``n_envs`` environments of ``n_balls`` balls."""
+    ns = 2 * (3 + n_balls)
+    return np.zeros((n_envs, WS_ROWS, ns)), np.zeros((n_envs, n_balls, mdl.WORK_COLUMNS))
+
+
+@njit(cache=True)
+def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
+    """Advance one state ``s`` (in place) from ``t0`` to ``t1`` with fixed-step RK4.
+
+    ``seg_d`` holds ``nseg`` drive rows, ``j`` is the index of the current row (as returned by
+    the previous call), ``ws`` a (>= 6, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
+    ``whirl[0]`` is incremented by the integral of the whirl radius over the substeps
+    (right-endpoint rule) and ``whirl[1]`` raised to the largest whirl radius seen.
+
+    Returns ``(status, j, failure time, index of the first non-finite entry, steps)``; status 0
+    is ok, 1 (``integrators.STATUS_NONFINITE``) means the state became non-finite; ``s`` then
+    holds the non-finite state (restore it from a copy if needed).
+    """
+    n = s.shape[0]
+    nq = n // 2
+    tmp = ws[4]
+    qdd = ws[5, :nq]
+    steps = 0
+    t = t0
+    while t < t1:
+        while j + 1 < nseg and seg_d[j + 1, mdl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
+            j += 1
+            integ._pin_prescribed(t, s, seg_d[j], nq)
+        piece_end = t1
+        if j + 1 < nseg and seg_d[j + 1, mdl.D_T0] < piece_end:
+            piece_end = seg_d[j + 1, mdl.D_T0]
+        m = int(math.ceil((piece_end - t) / dt_max - 1e-9))
+        if m < 1:
+            m = 1
+        h = (piece_end - t) / m
+        for i in range(m):
+            ti = t + i * h
+            integ._rk4_step(ti, h, s, p, b, seg_d[j], ws, tmp, qdd, work)
+            steps += 1
+            bad = integ._first_nonfinite(s)
+            if bad >= 0:
+                return integ.STATUS_NONFINITE, j, ti + h, bad, steps
+            r = math.sqrt(s[0] * s[0] + s[1] * s[1])
+            whirl[0] += r * h
+            if r > whirl[1]:
+                whirl[1] = r
+        t = piece_end
+        integ._pin_prescribed(t, s, seg_d[j], nq)
+    return integ.STATUS_OK, j, t1, -1, steps
+
+
+@njit(cache=True, parallel=True)
+def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
+    """:func:`integrators.rk4_run` for ``N`` environments in parallel.
+
+    ``s0`` (N, ns) initial states, ``t_out`` (T,) shared output times, ``seg_d``/``nseg`` the
+    drive tables, ``p``/``b`` the parameters, ``out`` (N, T, ns) receives the states.
+    ``status`` (N, 4) float receives (status, failure time, failing index, steps) per
+    environment, as ``rk4_run`` returns them.  Workspaces from :func:`make_workspace`.
+    """
+    n_env = s0.shape[0]
+    nq = s0.shape[1] // 2
+    for e in prange(n_env):
+        s = ws[e, WS_BACKUP]
+        s[:] = s0[e]
+        whirl = np.zeros(2)
+        j = 0
+        ns_e = nseg[e]
+        while j + 1 < ns_e and seg_d[e, j + 1, mdl.D_T0] <= t_out[0]:
+            j += 1
+        integ._pin_prescribed(t_out[0], s, seg_d[e, j], nq)
+        out[e, 0, :] = s
+        total = 0
+        st = integ.STATUS_OK
+        t_fail = t_out[-1]
+        bad = -1
+        for k in range(t_out.shape[0] - 1):
+            st, j, t_fail, bad, steps = advance(s, t_out[k], t_out[k + 1], seg_d[e], ns_e, j,
+                                                p[e], b[e], dt_max, ws[e], work[e], whirl)
+            total += steps
+            if st != integ.STATUS_OK:
+                break
+            out[e, k + 1, :] = s
+        status[e, 0] = st
+        status[e, 1] = t_fail
+        status[e, 2] = bad
+        status[e, 3] = total
