@@ -415,7 +415,8 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
         t_eval = t_out[mask]
         if not (len(t_eval) and t_eval[-1] == z):
             t_eval = np.append(t_eval, z)
-        sol = solve_ivp(rhs, (a, z), s, method=method, rtol=rtol, atol=atol, t_eval=t_eval)
+        with np.errstate(over="ignore"):  # scipy's finite-difference Jacobian probes far out
+            sol = solve_ivp(rhs, (a, z), s, method=method, rtol=rtol, atol=atol, t_eval=t_eval)
         nfev += sol.nfev
         if sol.status != 0 or not np.all(np.isfinite(sol.y)):
             finite = np.all(np.isfinite(sol.y), axis=0)

@@ -1,0 +1,159 @@
+"""Work-precision benchmark: error against a DOP853 reference versus wall time, for every
+integrator over a range of steps or tolerances, on two scenes.  ``abb-gym bench accuracy``."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..physics import MotorDrive, SimulationError, SpeedProfile, load_scene, simulate
+from ..physics import model as mdl
+from ..physics.simulate import default_step, drive_max_speed
+
+OUTPUT_DT = 0.01  # s, the environments' control interval
+
+
+@dataclass(frozen=True)
+class Case:
+    scene: str
+    drive: SpeedProfile
+    t_end: float
+    label: str
+
+
+def default_cases() -> list[Case]:
+    yoshida = load_scene("yoshida_odd")
+    cfrp = load_scene("spannan_cfrp")
+    accel = cfrp.drive_max_acceleration
+    return [
+        Case("yoshida_odd", SpeedProfile.dwell(40.0, yoshida.critical_speed, 0.5), 6.0,
+             "Yoshida run-up with a 0.5 s dwell, 6 s"),
+        Case("spannan_cfrp", SpeedProfile.ramp(accel, cfrp.drive_operating_speed),
+             cfrp.drive_operating_speed / accel + 10.0,
+             f"CFRP run-up at {accel:g} rad/s^2 to {cfrp.drive_operating_speed:g} rad/s"),
+    ]
+
+
+def settings(scene, case: Case) -> list[tuple[str, dict]]:
+    """(method, keyword arguments) pairs spanning coarse to fine."""
+    h0 = default_step(scene, drive_max_speed(case.drive, case.t_end), "rk4")
+    steps = [h0 * f for f in (4.0, 2.0, 1.0, 0.5, 0.25, 0.125)]
+    out = [("rk4", {"dt": h}) for h in steps]
+    out += [("etdrk4", {"dt": h}) for h in steps]
+    out += [("ros2", {"dt": h}) for h in steps[1:]]
+    out += [("dopri5", {"rtol": r}) for r in (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)]
+    out += [("DOP853", {"rtol": r}) for r in (1e-4, 1e-6, 1e-8)]
+    out += [("RK45", {"rtol": r}) for r in (1e-3, 1e-5, 1e-7)]
+    out += [("Radau", {"rtol": r}) for r in (1e-3, 1e-5, 1e-7)]
+    return out
+
+
+def errors(tr, ref) -> dict[str, float]:
+    """Peak-whirl, final-ball-angle and whole-trajectory errors of ``tr`` against ``ref``."""
+    w, wr = tr.whirl_ratio, ref.whirl_ratio
+    return {
+        "peak_whirl_rel": float(abs(w.max() / wr.max() - 1)),
+        "final_angle_deg": float(np.degrees(np.abs(tr.ball_angles[-1] - ref.ball_angles[-1]).max())),
+        "trajectory_rel": float(max(np.abs(w - wr).max() / wr.max(),
+                                    np.abs(tr.ball_angles - ref.ball_angles).max() / np.pi)),
+    }
+
+
+def _timed(scene, case, method, kw, repeats):
+    best = np.inf
+    tr = None
+    for _ in range(repeats):
+        tr = simulate(scene, case.drive, case.t_end, method=method, output_dt=OUTPUT_DT, **kw)
+        best = min(best, tr.wall_time)
+    return tr, best
+
+
+def run_accuracy(cases: list[Case] | None = None, repeats: int = 3,
+                 progress: bool = True) -> list[dict]:
+    """Rows: scene, method, setting, wall time per simulated second, work, the three errors
+    (NaN and ``stable = False`` where the method failed)."""
+    cases = cases or default_cases()
+    rows = []
+    simulate(load_scene("yoshida_odd"), SpeedProfile.ramp(40.0), 0.02)  # compile / load cache
+    for case in cases:
+        scene = load_scene(case.scene)
+        ref = simulate(scene, case.drive, case.t_end, method="DOP853", rtol=1e-12,
+                       output_dt=OUTPUT_DT)
+        todo = settings(scene, case)
+        for method, kw in tqdm(todo, desc=f"accuracy {case.scene}", disable=not progress):
+            setting = ", ".join(f"{k}={v:.3g}" for k, v in kw.items())
+            row = {"scene": case.scene, "method": method, "setting": setting}
+            try:
+                tr, wall = _timed(scene, case, method, kw,
+                                  repeats if method in ("rk4", "etdrk4", "dopri5", "ros2") else 1)
+                row.update(stable=True, wall_ms_per_sim_s=1e3 * wall / case.t_end,
+                           work=tr.work, **errors(tr, ref))
+            except SimulationError:
+                row.update(stable=False, wall_ms_per_sim_s=np.nan, work=0,
+                           peak_whirl_rel=np.nan, final_angle_deg=np.nan, trajectory_rel=np.nan)
+            rows.append(row)
+    return rows
+
+
+def energy_drift(t_end: float = 60.0, progress: bool = True) -> list[dict]:
+    """Relative energy drift of each integrator over a long undamped, free-rotor run."""
+    scene = load_scene("yoshida_odd", support_damping=0.0, ball_drag=0.0,
+                       ball_rolling_resistance=0.0, bearing_drag=0.0)
+    p, b = mdl.pack_parameters(scene)
+    drive = MotorDrive(torque=0.0, initial_speed=150.0)
+    kw = dict(ball_speeds0=[3.0, -2.0], x0=(1e-3, 0.0), output_dt=0.1)
+    runs = [("rk4", {"dt": 2e-3}), ("rk4", {"dt": 5e-4}), ("etdrk4", {"dt": 2e-3}),
+            ("ros2", {"dt": 5e-4}), ("dopri5", {"rtol": 1e-6}), ("dopri5", {"rtol": 1e-9}),
+            ("DOP853", {"rtol": 1e-10}), ("Radau", {"rtol": 1e-8})]
+    rows = []
+    for method, opts in tqdm(runs, desc="energy drift", disable=not progress):
+        tr = simulate(scene, drive, t_end, method=method, energy_tolerance=np.inf, **kw, **opts)
+        e = np.array([mdl.total_energy(s, p, b) for s in tr.states])
+        rows.append({"method": method, "setting": ", ".join(f"{k}={v:.3g}" for k, v in opts.items()),
+                     "t_end_s": t_end, "energy_drift_rel": float((e[-1] - e[0]) / e[0]),
+                     "max_abs_drift_rel": float(np.abs(e - e[0]).max() / e[0]),
+                     "wall_s": tr.wall_time})
+    return rows
+
+
+def plot_work_precision(rows: list[dict], path: str | Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+    metrics = [("peak_whirl_rel", "peak whirl, relative error"),
+               ("final_angle_deg", "final ball angle error [deg]"),
+               ("trajectory_rel", "whole trajectory, relative error")]
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    markers = dict(zip(methods, "osD^v<>ph*"))
+    fig, axes = plt.subplots(len(scenes), len(metrics), figsize=(14, 4.2 * len(scenes)),
+                             squeeze=False, constrained_layout=True)
+    for i, scene in enumerate(scenes):
+        for j, (key, label) in enumerate(metrics):
+            ax = axes[i, j]
+            for method in methods:
+                pts = [r for r in rows if r["scene"] == scene and r["method"] == method]
+                ok = [r for r in pts if r["stable"]]
+                x = [r["wall_ms_per_sim_s"] for r in ok]
+                y = [max(r[key], 1e-16) for r in ok]
+                line, = ax.loglog(x, y, marker=markers[method], label=method, lw=1)
+                bad = [r for r in pts if not r["stable"]]
+                if bad:
+                    ax.plot([], [], "x", color=line.get_color(),
+                            label=f"{method}: {len(bad)} unstable")
+            ax.set_xlabel("wall time per simulated second [ms]")
+            ax.set_ylabel(label)
+            ax.set_title(f"{scene}: {label}", fontsize=10)
+            ax.grid(True, which="both", alpha=0.3)
+            if j == 0:
+                ax.legend(fontsize=7)
+    fig.suptitle("Work-precision: error against DOP853 (rtol 1e-12) at a 10 ms output interval")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

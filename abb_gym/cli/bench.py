@@ -1,0 +1,58 @@
+"""``abb-gym bench``: ``accuracy`` draws the work-precision chart of every integrator (PNG +
+Markdown table + CSV) and the energy drift of long undamped runs; ``speed`` measures
+throughput."""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from ..tables import markdown_table
+
+
+def register(sub) -> None:
+    p = sub.add_parser("bench", help="benchmarks: work-precision chart and throughput",
+                       description=__doc__)
+    bsub = p.add_subparsers(dest="bench", required=True)
+    acc = bsub.add_parser("accuracy", help="work-precision chart of every integrator")
+    acc.add_argument("--out", default="out/bench", help="folder for PNG, CSV and Markdown")
+    acc.add_argument("--repeats", type=int, default=3, help="timing repeats (best of)")
+    acc.set_defaults(func=run_accuracy)
+    spd = bsub.add_parser("speed", help="throughput of simulate, gym.make and the vector env")
+    spd.add_argument("--out", default="out/bench", help="folder for the Markdown table")
+    spd.add_argument("--quick", action="store_true", help="shorter measurements (smoke test)")
+    spd.set_defaults(func=run_speed)
+
+
+def _write_csv(rows, path: Path) -> None:
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def run_accuracy(args) -> int:
+    from ..benchmarks.accuracy import energy_drift, plot_work_precision, run_accuracy as bench
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = bench(repeats=args.repeats)
+    png = plot_work_precision(rows, out / "work_precision.png")
+    _write_csv(rows, out / "work_precision.csv")
+    drift = energy_drift()
+    _write_csv(drift, out / "energy_drift.csv")
+    text = ("## Work-precision\n\n" + markdown_table(rows) + "\n\n## Energy drift, undamped "
+            "free rotor\n\n" + markdown_table(drift) + "\n")
+    (out / "accuracy.md").write_text(text)
+    print(text)
+    print(f"wrote {png}, {out / 'work_precision.csv'}, {out / 'accuracy.md'}")
+    return 0
+
+
+def run_speed(args) -> int:
+    from ..benchmarks.speed import run_speed as bench
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = bench(quick=args.quick)
+    text = markdown_table(rows)
+    (out / "speed.md").write_text(text + "\n")
+    print(text)
+    return 0

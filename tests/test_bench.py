@@ -1,0 +1,20 @@
+"""Smoke test of the work-precision benchmark (the real run is ``abb-gym bench accuracy``)."""
+import numpy as np
+
+from abb_gym import SpeedProfile
+from abb_gym.benchmarks.accuracy import Case, plot_work_precision, run_accuracy
+
+
+def test_work_precision_rows_and_chart(tmp_path):
+    case = Case("yoshida_odd", SpeedProfile.dwell(40.0, 100.0, 0.5), 3.0, "short")
+    rows = run_accuracy([case], repeats=1, progress=False)
+    methods = {r["method"] for r in rows}
+    assert {"rk4", "etdrk4", "ros2", "dopri5", "DOP853", "Radau", "RK45"} <= methods
+    stable = [r for r in rows if r["stable"]]
+    assert all(np.isfinite(r["trajectory_rel"]) and r["wall_ms_per_sim_s"] > 0 for r in stable)
+    # refining the step of each fixed-step method lowers its error
+    for method in ("rk4", "etdrk4", "ros2"):
+        errs = [r["trajectory_rel"] for r in stable if r["method"] == method]
+        assert errs[-1] < errs[0] / 100
+    png = plot_work_precision(rows, tmp_path / "wp.png")
+    assert png.read_bytes()[:4] == b"\x89PNG"
