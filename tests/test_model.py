@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import abb_gym
+from abb_gym.benchmarks.numpy_reference import yoshida_accelerations
 from abb_gym.physics import model as mdl
 from abb_gym.physics.drives import MotorDrive, SpeedProfile
 from abb_gym.physics.scene import load_scene
@@ -151,46 +152,6 @@ def test_accelerations_match_lagrange_equations_from_kinematics(n_balls, eccentr
         qdd = np.empty(len(q))
         mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(n_balls))
         np.testing.assert_allclose(qdd, ref, rtol=2e-5, atol=2e-6 * np.abs(ref).max())
-
-
-def yoshida_accelerations(scene, q, v, psi, dpsi, ddpsi):
-    """Yoshida (2014) eqs. (2-9)-(2-11) written out literally (two balls, sign())."""
-    m = scene.ball_mass[0]
-    a = scene.ball_radius[0]
-    inertia = scene.ball_inertia_factor[0] * m * a ** 2
-    big_r, k, c, cb = scene.race_radius, scene.support_stiffness_x, scene.support_damping_x, \
-        scene.ball_drag[0]
-    beta_b = scene.ball_rolling_resistance[0]
-    big_m = scene.total_mass
-    m0e = scene.imbalance
-    x, y = q[0], q[1]
-    dx, dy = v[0], v[1]
-    psis = psi + q[3:5]
-    dpsis = dpsi + v[3:5]
-    # unknowns: x'', y'', psi_1'', psi_2''
-    mat = np.zeros((4, 4))
-    rhs = np.zeros(4)
-    mat[0, 0] = big_m
-    rhs[0] = -c * dx - k * x + m0e * (ddpsi * np.sin(psi) + dpsi ** 2 * np.cos(psi))
-    mat[1, 1] = big_m
-    rhs[1] = -c * dy - k * y + m0e * (-ddpsi * np.cos(psi) + dpsi ** 2 * np.sin(psi))
-    for i in range(2):
-        mat[0, 2 + i] = -m * big_r * np.sin(psis[i])
-        rhs[0] += m * big_r * dpsis[i] ** 2 * np.cos(psis[i])
-        mat[1, 2 + i] = m * big_r * np.cos(psis[i])
-        rhs[1] += m * big_r * dpsis[i] ** 2 * np.sin(psis[i])
-        sgn = np.sign(dpsis[i] - dpsi)
-        # (m + I/a^2) R psi_i'' - m (x'' sin - y'' cos) + c_b R (psi_i' - psi')
-        #   = -m (beta_b/a) (R psi_i'^2 - x'' cos - y'' sin) sgn + ((R + a)/a^2) I psi''
-        row = 2 + i
-        mat[row, 2 + i] = (m + inertia / a ** 2) * big_r
-        mat[row, 0] = -m * np.sin(psis[i]) - m * beta_b / a * sgn * np.cos(psis[i])
-        mat[row, 1] = m * np.cos(psis[i]) - m * beta_b / a * sgn * np.sin(psis[i])
-        rhs[row] = (-cb * big_r * (dpsis[i] - dpsi)
-                    - m * beta_b / a * big_r * dpsis[i] ** 2 * sgn
-                    + (big_r + a) / a ** 2 * inertia * ddpsi)
-    sol = np.linalg.solve(mat, rhs)
-    return np.array([sol[0], sol[1], ddpsi, sol[2] - ddpsi, sol[3] - ddpsi])
 
 
 def test_yoshida_equations_are_a_special_case():
