@@ -13,6 +13,8 @@ import sys
 SUBCOMMANDS = [
     "abb_gym.cli.simulate",
     "abb_gym.cli.demo",
+    "abb_gym.cli.stability",
+    "abb_gym.cli.bench",
 ]
 
 

@@ -31,14 +31,17 @@ Equations (derived from the paper's energies T (2), V (3), F (4); the printed (5
 numerical Lagrangian of (2)-(4))::
 
   x:   x'' + 2 zeta x' + (1 - W^2) x - 2 W y' - (2 zeta W + W') y - mu_d eps W^2
-       + mbar sum[(d_i'' - d_i (p_i' + W)^2) cos p_i - (d_i p_i'' + 2 d_i' (p_i' + W) + d_i W') sin p_i] = 0
+       + mbar sum[(d_i'' - d_i (p_i' + W)^2) cos p_i
+                  - (d_i p_i'' + 2 d_i' (p_i' + W) + d_i W') sin p_i] = 0
   y:   y'' + 2 zeta y' + (1 - W^2) y + 2 W x' + (2 zeta W + W') x + mu_d eps W'
-       + mbar sum[(d_i'' - d_i (p_i' + W)^2) sin p_i + (d_i p_i'' + 2 d_i' (p_i' + W) + d_i W') cos p_i] = 0
+       + mbar sum[(d_i'' - d_i (p_i' + W)^2) sin p_i
+                  + (d_i p_i'' + 2 d_i' (p_i' + W) + d_i W') cos p_i] = 0
   p_i: mbar { d_i^2 p_i'' + 2 beta d_i^2 p_i' + 2 d_i d_i' (p_i' + W) + d_i^2 W'
               + d_i [-x'' sin p_i + y'' cos p_i + 2 W (x' cos p_i + y' sin p_i)
                      + W^2 (x sin p_i - y cos p_i) + W' (x cos p_i + y sin p_i)] + eta q_i } = 0
   d_i: mbar { d_i'' + 2 beta d_i' + f^2 (d_i - 1) - d_i (p_i' + W)^2 + x'' cos p_i + y'' sin p_i
-              - W^2 (x cos p_i + y sin p_i) + 2 W (x' sin p_i - y' cos p_i) + W' (x sin p_i - y cos p_i) } = 0
+              - W^2 (x cos p_i + y sin p_i) + 2 W (x' sin p_i - y' cos p_i)
+              + W' (x sin p_i - y cos p_i) } = 0
   q_1 = p_1 - p_2 + 2 pi/n,  q_i = 2 p_i - p_{i-1} - p_{i+1},  q_n = p_n - p_{n-1} - 2 pi/n
 
 Decisions recorded here:
@@ -62,6 +65,7 @@ lambda [m] only convert a physical SpeedProfile and times; the model itself is d
 """
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -186,7 +190,8 @@ def _rhs_kernel(s, w, wd, par, n, radial, out):
     x, y = s[0], s[1]
     vx, vy = s[nq], s[nq + 1]
     # translational right-hand sides (everything but the mass-matrix terms)
-    fx = -2 * zeta * vx - (1 - w * w) * x + 2 * w * vy + (2 * zeta * w + wd) * y + mu_d * eps * w * w
+    fx = (-2 * zeta * vx - (1 - w * w) * x + 2 * w * vy + (2 * zeta * w + wd) * y
+          + mu_d * eps * w * w)
     fy = -2 * zeta * vy - (1 - w * w) * y - 2 * w * vx - (2 * zeta * w + wd) * x - mu_d * eps * wd
     # Schur complement of the (diagonal) ball block
     a00 = 1.0
@@ -270,10 +275,15 @@ def _speed_function(params: SpringRodBalancer, speed) -> Callable[[float], tuple
     """tau -> (W, W') for a constant, a physical SpeedProfile or a callable."""
     if isinstance(speed, SpeedProfile):
         wn = params.natural_frequency
+        # piecewise-constant acceleration: tabulate the segment starts once
+        t0 = [float(v) for v in speed.breakpoints]
+        w0 = [float(v) for v in speed.speed(np.asarray(t0))]
+        acc = [float(v) for v in speed.acceleration(np.asarray(t0))]
 
         def fn(tau):
             t = tau / wn
-            return float(speed.speed(t)) / wn, float(speed.acceleration(t)) / (wn * wn)
+            k = max(0, bisect.bisect_right(t0, t) - 1)
+            return (w0[k] + acc[k] * (t - t0[k])) / wn, acc[k] / (wn * wn)
         return fn
     if callable(speed):
         return lambda tau: tuple(float(v) for v in speed(tau))
