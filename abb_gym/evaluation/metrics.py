@@ -1,0 +1,123 @@
+"""Run-up metrics from sampled time histories (a :class:`Trajectory` or an environment rollout).
+
+All functions take plain arrays so that ``simulate`` trajectories and environment rollouts are
+scored by the same code:
+
+=============================  ===========  ====================================================
+metric                         unit         definition
+=============================  ===========  ====================================================
+``time_to_speed``              s            first time the rotor speed reaches 99 % of the
+                                            operating speed (NaN if never)
+``peak_whirl``                 -            largest W_r / e before the operating speed is reached
+``residual_vibration``         -            mean W_r / e over the last ``settle_window`` s
+``ball_settling_time``         s            time after reaching the operating speed until every
+                                            ball angle stays within ``angle_tol`` of its final
+                                            value (NaN if never at speed)
+``residual_imbalance``         -            |U0 + sum m_i (E e^(i gam) + R e^(i ph_i))| / U0 at
+                                            the end, the imbalance the balls leave uncancelled
+``balanced``                   bool         residual imbalance within ``balance_tol`` U0 of the
+                                            best the balls can reach, max(0, U0 - capacity)
+``nonsynchronous_whirl``       bool         after the critical speed, some ball slips a full
+                                            revolution (2 pi) behind the rotor within 1 s: it
+                                            circulates instead of settling
+``drive_energy``               J            integral of |T w| dt (when the torque is known)
+=============================  ===========  ====================================================
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..physics.scene import Scene
+
+SPEED_FRACTION = 0.99
+
+
+def no_ball_amplitude(scene: Scene, speed: float) -> float:
+    """Steady whirl radius [m] of the same rotor without balls at ``speed`` [rad/s]:
+    U0 w^2 / |k - M w^2 + i c w| (the softer axis of an orthotropic support)."""
+    m = scene.total_mass
+    amp = []
+    for k, c in ((scene.support_stiffness_x, scene.support_damping_x),
+                 (scene.support_stiffness_y, scene.support_damping_y)):
+        amp.append(scene.imbalance * speed ** 2 / math.hypot(k - m * speed ** 2, c * speed))
+    return max(amp)
+
+
+def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
+                  operating_speed: float | None = None, torque=None,
+                  settle_window: float = 0.5, angle_tol: float = math.radians(2.0),
+                  balance_tol: float = 0.1) -> dict[str, Any]:
+    """The metrics of the module docstring for one run."""
+    t = np.asarray(t, float)
+    w = np.asarray(rotor_speed, float)
+    ratio = np.asarray(whirl_radius, float) / scene.reference_length
+    angles = np.asarray(ball_angles, float).reshape(len(t), -1)
+    op = scene.drive_operating_speed if operating_speed is None else operating_speed
+    reached = np.nonzero(w >= SPEED_FRACTION * op)[0]
+    k_reach = int(reached[0]) if reached.size else None
+    t_reach = float(t[k_reach]) if k_reach is not None else math.nan
+    runup = ratio[: k_reach + 1] if k_reach is not None else ratio
+    tail = t >= t[-1] - settle_window
+    residual = float(np.mean(ratio[tail]))
+    settle = math.nan
+    if k_reach is not None:
+        dev = np.max(np.abs(angles - angles[-1]), axis=1) > angle_tol
+        late = np.nonzero(dev[k_reach:])[0]
+        settle = 0.0 if late.size == 0 else float(t[k_reach + late[-1]] - t[k_reach])
+        if late.size and k_reach + late[-1] == len(t) - 1:
+            settle = math.nan  # still moving at the end
+    imbalance = residual_imbalance(scene, angles[-1])
+    energy = math.nan
+    if torque is not None:
+        energy = float(np.trapezoid(np.abs(np.asarray(torque, float) * w), t))
+    return {
+        "time_to_speed": t_reach,
+        "peak_whirl": float(runup.max()),
+        "residual_vibration": residual,
+        "ball_settling_time": settle,
+        "residual_imbalance": imbalance,
+        "balanced": bool(imbalance <= best_residual_imbalance(scene) + balance_tol),
+        "nonsynchronous_whirl": nonsynchronous_whirl(scene, t, w, angles),
+        "drive_energy": energy,
+    }
+
+
+def residual_imbalance(scene: Scene, ball_angles) -> float:
+    """|U0 + sum m_i (E e^(i gam) + R e^(i ph_i))| / U0 for ball angles relative to the rotor."""
+    m = np.asarray(scene.ball_mass)
+    ph = np.asarray(ball_angles, float)
+    z = scene.imbalance + np.sum(m * (scene.race_eccentricity * np.exp(1j * scene.race_eccentricity_angle)
+                                      + scene.race_radius * np.exp(1j * ph)))
+    return float(abs(z) / scene.imbalance)
+
+
+def best_residual_imbalance(scene: Scene) -> float:
+    """The smallest residual imbalance / U0 the balls can reach (without eccentricity)."""
+    return max(0.0, 1.0 - scene.balancing_capacity / scene.imbalance)
+
+
+def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles, window: float = 1.0) -> bool:
+    """True if, above the critical speed, some ball's relative angle drops by 2 pi within
+    ``window`` seconds (the ball orbits slower than the rotor instead of settling)."""
+    t = np.asarray(t, float)
+    above = np.nonzero(np.asarray(rotor_speed) >= scene.critical_speed)[0]
+    if not above.size:
+        return False
+    start = int(above[0])
+    ang = np.asarray(ball_angles, float)[start:]
+    tt = t[start:]
+    if len(tt) < 2:
+        return False
+    lag = np.searchsorted(tt, tt + window)
+    lag = np.minimum(lag, len(tt) - 1)
+    drop = ang - ang[lag]
+    return bool(np.any(drop > 2 * math.pi))
+
+
+def trajectory_metrics(tr, **kwargs) -> dict[str, Any]:
+    """:func:`runup_metrics` of a :class:`~abb_gym.physics.simulate.Trajectory`."""
+    return runup_metrics(tr.scene, tr.t, tr.rotor_speed, tr.whirl_radius, tr.ball_angles,
+                         torque=tr.motor_torque, **kwargs)

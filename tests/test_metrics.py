@@ -1,0 +1,103 @@
+"""Metrics on hand-made time histories with known answers, and the baseline profiles."""
+import math
+
+import numpy as np
+import pytest
+
+from abb_gym import load_scene, simulate
+from abb_gym.baselines import profiles
+from abb_gym.evaluation.metrics import (best_residual_imbalance, no_ball_amplitude,
+                                        nonsynchronous_whirl, residual_imbalance, runup_metrics)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("yoshida_odd")
+
+
+def test_metrics_on_a_hand_made_run(scene):
+    t = np.linspace(0.0, 10.0, 1001)
+    speed = np.minimum(40.0 * t, 240.0)            # reaches 0.99 * 240 at t = 5.94 s
+    e = scene.reference_length
+    whirl = e * np.where(t < 3.0, 10.0 * t, 2.0)    # peak 29.9 e before 3 s, then 2 e
+    # balls slide from 0 to the balanced split and stop at t = 7 s
+    target = np.array([math.pi - 1.0, math.pi + 1.0])
+    frac = np.clip(t / 7.0, 0.0, 1.0)[:, None]
+    angles = frac * target
+    torque = np.full_like(t, 1e-3)
+    m = runup_metrics(scene, t, speed, whirl, angles, torque=torque)
+    assert m["time_to_speed"] == pytest.approx(5.94, abs=0.011)
+    assert m["peak_whirl"] == pytest.approx(29.9, abs=1e-9)
+    assert m["residual_vibration"] == pytest.approx(2.0)
+    # within 2 deg of the final value from t = 7 - 7 * (2 deg / 1 rad..): solve exactly
+    t_in = 7.0 * (1 - math.radians(2.0) / (math.pi + 1.0))
+    assert m["ball_settling_time"] == pytest.approx(t_in - 5.94, abs=0.011)
+    expected_energy = 1e-3 * (0.5 * 40 * 6.0 ** 2 + 240.0 * 4.0)
+    assert m["drive_energy"] == pytest.approx(expected_energy, rel=1e-3)
+    assert not m["nonsynchronous_whirl"]
+
+
+def test_residual_imbalance_and_balanced_flag(scene):
+    u, cap = scene.imbalance, scene.balancing_capacity
+    assert residual_imbalance(scene, [0.0, 0.0]) == pytest.approx(1 + cap / u)
+    # two balls cancel U0 exactly at pi +- arccos(U0 / (2 m R)) (physics note A5)
+    half = math.acos(u / cap)
+    assert residual_imbalance(scene, [math.pi - half, math.pi + half]) == pytest.approx(0.0, abs=1e-12)
+    assert best_residual_imbalance(scene) == 0.0
+    t = np.linspace(0, 1, 11)
+    m = runup_metrics(scene, t, np.full(11, 240.0), np.zeros(11),
+                      np.tile([math.pi - half, math.pi + half], (11, 1)))
+    assert m["balanced"]
+    m = runup_metrics(scene, t, np.full(11, 240.0), np.zeros(11), np.zeros((11, 2)))
+    assert not m["balanced"]
+
+
+def test_nonsynchronous_whirl_detects_a_circulating_ball(scene):
+    t = np.linspace(0.0, 5.0, 501)
+    speed = np.full_like(t, 150.0)
+    lagging = np.stack([-50.0 * t, np.full_like(t, math.pi)], axis=1)  # 50 rad/s behind
+    settled = np.stack([-1.0 * t, np.full_like(t, math.pi)], axis=1)
+    assert nonsynchronous_whirl(scene, t, speed, lagging)
+    assert not nonsynchronous_whirl(scene, t, speed, settled)
+    assert not nonsynchronous_whirl(scene, t, np.full_like(t, 50.0), lagging)  # below critical
+
+
+def test_no_ball_amplitude_is_the_jeffcott_response(scene):
+    w = 240.0
+    expected = scene.imbalance * w ** 2 / math.hypot(1000 - 0.1 * w ** 2, 0.2 * w)
+    assert no_ball_amplitude(scene, w) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("name", list(profiles.FAMILIES))
+def test_every_baseline_profile_reaches_and_holds_the_operating_speed(scene, name):
+    prof = profiles.build(name, scene)
+    end = profiles.duration(prof)
+    assert prof.speed(end + 1.0) == pytest.approx(scene.drive_operating_speed)
+    assert prof.acceleration(end + 1.0) == 0.0
+    t = np.linspace(0, end, 2000)
+    assert np.all(prof.speed(t) >= -1e-9)
+    assert np.all(prof.speed(t) <= scene.drive_operating_speed + 1e-9)
+
+
+def test_yoshida_default_dwell_is_the_thesis_profile(scene):
+    """Scaling rule at the reference scene: dwell at omega_c = 100 rad/s for 0.5 s at 40 rad/s^2."""
+    prof = profiles.build("speed_dwell", scene)
+    np.testing.assert_allclose(prof.breakpoints[:3], [0.0, 2.5, 3.0])
+    tr = simulate(scene, prof, 6.0)
+    assert tr.whirl_ratio.max() == pytest.approx(62.5, abs=0.5)  # Fig. 4.7 as in test_validation
+
+
+def test_speed_reduction_drops_to_the_plateau(scene):
+    prof = profiles.build("speed_reduction", scene, plateau_speed=130.0, plateau_time=0.4)
+    bp = prof.breakpoints
+    assert prof.speed(bp[3] + 0.2) == pytest.approx(130.0)
+    assert prof.speed(bp[2]) == pytest.approx(scene.drive_operating_speed)
+
+
+def test_bad_baseline_parameters(scene):
+    with pytest.raises(ValueError, match="unknown baseline"):
+        profiles.build("magic", scene)
+    with pytest.raises(ValueError, match="dwell_speed"):
+        profiles.build("speed_dwell", scene, dwell_speed=1e4)
+    with pytest.raises(ValueError, match="dwell_accel"):
+        profiles.build("decel_dwell", scene, dwell_accel=5.0)
