@@ -58,6 +58,8 @@ def test_nonsynchronous_whirl_detects_a_circulating_ball(scene):
     lagging = np.stack([-50.0 * t, np.full_like(t, math.pi)], axis=1)  # 50 rad/s behind
     settled = np.stack([-1.0 * t, np.full_like(t, math.pi)], axis=1)
     assert nonsynchronous_whirl(scene, t, speed, lagging)
+    assert nonsynchronous_whirl(scene, t, speed, lagging, window=1.0)  # 50 rad in 1 s
+    assert not nonsynchronous_whirl(scene, t, speed, 0.2 * lagging, window=0.5)  # 5 rad in 0.5 s
     assert not nonsynchronous_whirl(scene, t, speed, settled)
     assert not nonsynchronous_whirl(scene, t, np.full_like(t, 50.0), lagging)  # below critical
 

@@ -109,3 +109,27 @@ def test_motor_run_up_passes_the_critical_speed_with_limited_power_drive():
     assert abs(tr.rotor_speed[-1] - expected) < 0.5
     assert np.all(np.abs(tr.motor_torque) <= scene.drive_torque_limit + 1e-15)
     assert tr.whirl_ratio.max() > 10  # it went through resonance
+
+
+@pytest.mark.parametrize("mass, drag, dwell, expected, tol", [
+    (1e-3, 1.0, False, -150.0, 15.0),   # "only about -150 deg 2.5 s after the critical speed"
+    (2e-3, 1.0, False, -540.0, 60.0),   # lags the rotor, "settle near -540 deg"
+    (2e-3, 2.0, False, -200.0, 15.0),   # "c_b = 2 suppresses this (about -200 deg)"
+    (1e-3, 1.0, True, -200.0, 15.0),    # with the 0.5 s profile "near -200 deg within ~1 s"
+])
+def test_yoshida_chapter_5_ball_position_after_the_critical_speed(mass, drag, dwell, expected,
+                                                                  tol):
+    """Yoshida ch. 5 (physics note): ball position 2.5 s after the critical speed, read from
+    the text's rounded statements; +-15 deg for "about", +-60 deg for "near -540 deg" (the
+    balls are still drifting there).  The m = 2 g, c_b = 1 case must show the
+    non-synchronous lag (more than a full turn behind), and the metric must flag it."""
+    from abb_gym.evaluation.metrics import nonsynchronous_whirl
+    scene = load_scene("yoshida_odd", ball_mass=mass, ball_drag=drag)
+    drive = (SpeedProfile.dwell(40.0, scene.critical_speed, 0.5) if dwell
+             else SpeedProfile.ramp(40.0))
+    t_c = scene.critical_speed / 40.0
+    tr = simulate(scene, drive, t_c + 2.5, output_dt=0.01)
+    angles = np.degrees(tr.ball_angles[-1])
+    assert np.all(np.abs(angles - expected) < tol), angles
+    lagging = expected < -360
+    assert nonsynchronous_whirl(scene, tr.t, tr.rotor_speed, tr.ball_angles) == lagging

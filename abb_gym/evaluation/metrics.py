@@ -17,8 +17,8 @@ metric                         unit         definition
                                             the end, the imbalance the balls leave uncancelled
 ``balanced``                   bool         residual imbalance within ``balance_tol`` U0 of the
                                             best the balls can reach, max(0, U0 - capacity)
-``nonsynchronous_whirl``       bool         after the critical speed, some ball slips a full
-                                            revolution (2 pi) behind the rotor within 1 s: it
+``nonsynchronous_whirl``       bool         after the critical speed, some ball slips more than
+                                            a full revolution (2 pi) behind the rotor: it
                                             circulates instead of settling
 ``drive_energy``               J            integral of |T w| dt (when the torque is known)
 =============================  ===========  ====================================================
@@ -99,22 +99,25 @@ def best_residual_imbalance(scene: Scene) -> float:
     return max(0.0, 1.0 - scene.balancing_capacity / scene.imbalance)
 
 
-def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles, window: float = 1.0) -> bool:
-    """True if, above the critical speed, some ball's relative angle drops by 2 pi within
-    ``window`` seconds (the ball orbits slower than the rotor instead of settling)."""
+def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles,
+                         window: float | None = None) -> bool:
+    """True if, after the rotor passes the critical speed, some ball slips more than a full
+    revolution (2 pi) behind the rotor: it orbits slower than the rotor instead of settling
+    (Yoshida ch. 5, Spannan's Sommerfeld region).  With ``window`` [s] the slip must happen
+    within that time (a faster circulation)."""
     t = np.asarray(t, float)
     above = np.nonzero(np.asarray(rotor_speed) >= scene.critical_speed)[0]
     if not above.size:
         return False
     start = int(above[0])
-    ang = np.asarray(ball_angles, float)[start:]
+    ang = np.asarray(ball_angles, float).reshape(len(t), -1)[start:]
     tt = t[start:]
     if len(tt) < 2:
         return False
-    lag = np.searchsorted(tt, tt + window)
-    lag = np.minimum(lag, len(tt) - 1)
-    drop = ang - ang[lag]
-    return bool(np.any(drop > 2 * math.pi))
+    if window is None:
+        return bool(np.any(ang[0] - ang.min(axis=0) > 2 * math.pi))
+    lag = np.minimum(np.searchsorted(tt, tt + window), len(tt) - 1)
+    return bool(np.any(ang - ang[lag] > 2 * math.pi))
 
 
 def trajectory_metrics(tr, **kwargs) -> dict[str, Any]:
