@@ -133,3 +133,19 @@ def test_yoshida_chapter_5_ball_position_after_the_critical_speed(mass, drag, dw
     assert np.all(np.abs(angles - expected) < tol), angles
     lagging = expected < -360
     assert nonsynchronous_whirl(scene, tr.t, tr.rotor_speed, tr.ball_angles) == lagging
+
+
+def test_yoshida_fig_4_23_settling_period_against_dwell_length():
+    """Yoshida sec. 4.4 (L1930), dwell lengths 0.4-0.7 s: with a constant-speed dwell the
+    balls reach -180 deg fastest at 0.4 s; with a constant-acceleration dwell fastest at
+    0.5 s; and the constant-acceleration dwell is faster except at 0.4 s.  (Ties within 5 ms
+    count as "fastest": beyond 0.5 s the ball arrives during the dwell, so its length no
+    longer matters.)"""
+    from abb_gym.evaluation.studies import settling_study
+    rows = settling_study(dwell_times=(0.4, 0.5, 0.6, 0.7), progress=False)
+    speed = {r["dwell_time_s"]: r["settling_period_s"] for r in rows if r["dwell_accel"] == 0}
+    accel = {r["dwell_time_s"]: r["settling_period_s"] for r in rows if r["dwell_accel"] > 0}
+    assert min(speed, key=speed.get) == 0.4
+    assert accel[0.5] <= min(accel.values()) + 0.005
+    assert accel[0.4] > speed[0.4]
+    assert all(accel[tc] < speed[tc] for tc in (0.5, 0.6, 0.7))
