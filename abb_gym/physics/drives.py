@@ -5,9 +5,22 @@
   piecewise constants.  Ramps, constant-speed dwells, constant-acceleration or deceleration
   dwells (Yoshida ch. 3-4) and the hold at operating speed are all such segments.
 * :class:`MotorDrive` makes the rotor spin a degree of freedom (Spannan eq. 4.16) driven by a
-  motor torque ``T = clip(T_cmd + g (w_target(t) - w), -T_max, T_max)``.  With ``g = 0`` it is
-  a torque command; with ``T_cmd = 0`` it is the limited-power drive of Spannan (note section
-  1.5), ``M_0 = beta_0 (w_target - w)``.  The bearing drag of the scene acts in addition.
+  motor torque ``T = clip(T_cmd + g (w_target(t) - w), -T_max(w), T_max(w))``.  With ``g = 0``
+  it is a torque command; with ``T_cmd = 0`` it is the limited-power drive of Spannan (note
+  section 1.5), ``M_0 = beta_0 (w_target - w)``.  The bearing drag of the scene acts in
+  addition.  The available torque ``T_max(w)`` is the torque limit, optionally falling
+  linearly to 0 at a no-load speed (the torque-speed characteristic of a DC or a
+  voltage-limited motor) and capped by a power limit ``|T w| <= P``.
+
+**Limited power and the Sommerfeld effect.**  A drive whose available torque falls with speed
+can be captured at the critical speed: near resonance the whirl of the imbalance dissipates
+power through the support damping (and the lagging balls through their drag), which shows up
+as a load torque on the rotor; where that load exceeds what the motor has left, the run-up
+stalls just below the critical speed although the motor's no-load speed lies far above it.
+A stronger drive, or a faster passage, jumps through.  :meth:`MotorDrive.linear_characteristic`
+builds the classic open-loop characteristic ``T = T_stall (1 - w / w_no_load)``.  This matters
+whenever the drive's power reserve at the critical speed is comparable to the resonance loss
+(small motors, heavy imbalance, light support damping); a prescribed speed profile hides it.
 
 Both produce a segment table for the compiled kernels (one row per segment, see
 :mod:`abb_gym.physics.model`), with segment starts at every breakpoint so that fixed-step
@@ -185,9 +198,11 @@ class SpeedProfile:
 class MotorDrive:
     """Rotor spin as a degree of freedom, driven by a torque-limited motor.
 
-    ``T = clip(torque + speed_gain * (w_target(t) - w), -torque_limit, torque_limit)`` [N m]
+    ``T = clip(torque + speed_gain * (w_target(t) - w), -T_max(w), T_max(w))`` [N m]
     with ``w_target`` a constant [rad/s] or a :class:`SpeedProfile`.  ``torque_limit`` None
-    takes the scene's ``drive_torque_limit``.
+    takes the scene's ``drive_torque_limit``.  The available torque is
+    ``T_max(w) = min(torque_limit * max(0, 1 - |w| / no_load_speed), power_limit / |w|)``,
+    each factor only when given (``no_load_speed`` [rad/s], ``power_limit`` [W]).
     """
 
     torque: float = 0.0
@@ -196,8 +211,14 @@ class MotorDrive:
     torque_limit: float | None = None
     initial_speed: float = 0.0
     initial_angle: float = 0.0
+    no_load_speed: float | None = None
+    power_limit: float | None = None
 
     def __post_init__(self) -> None:
+        if self.no_load_speed is not None:
+            _finite("no_load_speed", self.no_load_speed, positive=True, unit="rad/s")
+        if self.power_limit is not None:
+            _finite("power_limit", self.power_limit, positive=True, unit="W")
         _finite("torque", self.torque, unit="N m")
         _finite("speed_gain", self.speed_gain, nonneg=True, unit="N m s")
         if not isinstance(self.target, SpeedProfile):
@@ -219,6 +240,18 @@ class MotorDrive:
         return cls(speed_gain=_finite("gain", gain, positive=True, unit="N m s"),
                    target=target, torque_limit=torque_limit)
 
+    @classmethod
+    def linear_characteristic(cls, stall_torque: float, no_load_speed: float,
+                              power_limit: float | None = None, initial_speed: float = 0.0
+                              ) -> "MotorDrive":
+        """Open-loop motor ``T = stall_torque (1 - w / no_load_speed)`` [N m] for
+        0 <= w <= no_load_speed (0 above), optionally also capped at ``power_limit`` [W]."""
+        stall = _finite("stall_torque", stall_torque, positive=True, unit="N m")
+        return cls(torque=stall, torque_limit=stall,
+                   no_load_speed=_finite("no_load_speed", no_load_speed, positive=True,
+                                         unit="rad/s"),
+                   power_limit=power_limit, initial_speed=initial_speed)
+
     def limit(self, scene: Scene) -> float:
         return scene.drive_torque_limit if self.torque_limit is None else self.torque_limit
 
@@ -238,13 +271,21 @@ class MotorDrive:
         rows[:, mdl.D_TW0] = w0
         rows[:, mdl.D_TALPHA] = acc
         rows[:, mdl.D_TLIM] = self.limit(scene)
+        rows[:, mdl.D_WNL] = self.no_load_speed or 0.0
+        rows[:, mdl.D_PLIM] = self.power_limit or 0.0
         return t0.copy(), rows
 
     def torque_at(self, t, speed, scene: Scene):
         """Motor torque [N m] at times ``t`` and rotor speeds ``speed``."""
         target = self.target.speed(t) if isinstance(self.target, SpeedProfile) \
             else np.full(np.shape(t), float(self.target))
-        lim = self.limit(scene)
+        speed = np.asarray(speed, dtype=float)
+        lim = np.full(np.shape(speed), self.limit(scene))
+        if self.no_load_speed:
+            lim = lim * np.maximum(0.0, 1.0 - np.abs(speed) / self.no_load_speed)
+        if self.power_limit:
+            with np.errstate(divide="ignore"):
+                lim = np.minimum(lim, self.power_limit / np.abs(speed))
         return np.clip(self.torque + self.speed_gain * (target - speed), -lim, lim)
 
     def initial_rotor_state(self) -> tuple[float, float]:

@@ -60,6 +60,36 @@ Decisions recorded here:
 * The rotor row carries no reaction of the race drag or the rolling resistance: both act
   between ball and rotor and do virtual work only on the relative coordinate ph_i.
 
+Extended physics (each switched per scene by its parameters, :attr:`Scene.effects`; the kernel
+tests a flag per effect and skips the terms of an effect that is off):
+
+* **Gravity** (``gravity``, horizontal-axis rotors): g along (cos a, sin a) in the fixed
+  frame, a = ``gravity_angle`` (default -pi/2).  From V = -g . (sum of mass x position)
+  (:func:`gravity_energy`): ``Q_x = M g cos a``, ``Q_y = M g sin a``,
+  ``Q_th = g (sin a Cy - cos a Sx)`` and ``Q_ph,i = g m_i R sin(a - th - ph_i)``; the race
+  normal force gains the outward weight component ``m_i g cos(a - th - ph_i)``.  Static sag:
+  ``y = -M g / k_y``.  The ball stays on its track (bilateral constraint): when the weight
+  beats the centrifugal force (R (th'+ph')^2 < g, a ball in the upper half at low speed) N
+  turns negative, read as the ball bearing on the inner wall of the annulus, and friction and
+  rolling resistance use |N| (its sign taken from the velocity-dependent part of N).  Real balls
+  would fall and roll at the bottom there; the model is right for R Omega^2 > g and for balls in
+  the lower half.  Gravity matters while the rotor is slow (start-up of washing machines and
+  horizontal centrifuges: the balls gather at the bottom and are dragged round; R Omega^2 / g
+  is 420 at 1200 rpm in the washer scene but below 1 under 59 rpm) and for the static sag of
+  soft suspensions; it is "of minor relevance at the appropriate speed" (Spannan L1258).
+* **Ball-ball contact** (``ball_contact``): penalty on the angular gap, equal and opposite
+  generalised forces on the two balls (:mod:`abb_gym.physics.contact`); its radial part adds
+  to the race normal force.  The penalty energy is part of :func:`total_energy`.
+* **Nonlinear race drag** (``fluid_drag``): ``Q = -F(R ph') R`` with the c_d(Re) laws of
+  :mod:`abb_gym.physics.fluids`, fluid co-rotating with the rotor; added to any ``ball_drag``.
+* **Virtual mass** (``virtual_mass``): ``c_vm rho V R^2`` added to I_i (and so to the mass
+  matrix diagonal and the kinetic energy); see :mod:`abb_gym.physics.fluids`.
+* **Friction and stick** (``friction``/``stiction``): ``Q_fric,i = -mu(R ph') R |N_i|`` with
+  the regularised Coulomb/Stribeck law of :mod:`abb_gym.physics.friction`; it shares the
+  normal force (and so the left-hand-side acceleration terms) with the rolling resistance.
+* The limited-power drive needs no new equations: the motor torque of :func:`drive_state`
+  gets an available-torque envelope (linear torque-speed characteristic, power limit).
+
 Solution: the ball block of the matrix is diagonal, so the balls are eliminated with a Schur
 complement and only a 2x2 (prescribed speed) or 3x3 (rotor spin as a DOF) system is solved.
 Kernels assume valid input; validation happens in :mod:`abb_gym.physics.scene`.
@@ -71,20 +101,42 @@ import math
 import numpy as np
 from numba import njit
 
+from . import contact as _contact
+from . import fluids as _fluids
+from .friction import friction_coefficient, friction_secant
 from .scene import Scene
 
-# scalar parameter vector layout
+# scalar parameter vector layout (new entries are appended; users size arrays with N_PARAMS)
 P_MASS, P_KX, P_KY, P_CX, P_CY, P_U0, P_J, P_BETA0, P_R, P_E, P_GAM, P_UREG, P_ROLL, P_ECC = \
     range(14)
-N_PARAMS = 14
-# per-ball parameter matrix columns
+# extended physics: gravity (flag, components g cos(angle), g sin(angle) [m/s^2]); ball-ball
+# contact (stiffness [N/m], damping ratio); fluid drag law (kernel id, cubic of log10 c_d over
+# log10 Re, plateau c_d); friction (flag, mu_k, mu_s, regularisation and Stribeck speeds [m/s])
+(P_GRAV, P_GX, P_GY, P_KC, P_ZC, P_DLAW, P_CD0, P_CD1, P_CD2, P_CD3, P_CDINF, P_FRIC, P_MUK,
+ P_MUS, P_UFR, P_USTR) = range(14, 30)
+P_EXT = 30  # 1 if any of the extended effects above (or the virtual mass) is on
+N_PARAMS = 31
+EXTENDED_EFFECTS = frozenset({"gravity", "ball_contact", "fluid_drag", "virtual_mass",
+                              "friction"})
+# per-ball parameter matrix columns: mass [kg], radius [m], spin inertia [kg m^2], race drag
+# torque coefficient [N m s], rolling-resistance offset / radius [-]; added relative inertia
+# of the virtual mass [kg m^2], Stokes drag coefficient [N s/m], rho pi r^2 / 2 [kg/m],
+# Reynolds number per relative speed 2 r / nu [s/m], effective track mass I_i / R^2 [kg]
 B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
-N_BALL_PARAMS = 5
-# drive row layout: one row per segment of piecewise-constant drive law
-(D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM) = range(10)
-N_DRIVE = 10
+B_VM, B_KLIN, B_KQUAD, B_REU, B_MEFF = range(5, 10)
+N_BALL_PARAMS = 10
+# drive row layout: one row per segment of piecewise-constant drive law; D_WNL (no-load speed
+# [rad/s] of a linear torque-speed envelope, 0 = none) and D_PLIM (power limit [W], 0 = none)
+# were appended for the limited-power drive
+(D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM, D_WNL,
+ D_PLIM) = range(12)
+N_DRIVE = 12
 MODE_PRESCRIBED = 0.0
 MODE_MOTOR = 1.0
+# scratch columns of accelerations(): 0-7 the ball rows, 8-9 the contact forces
+WORK_COLUMNS = 10
+W_QC = 8  # generalised contact force on the ball [N m]
+W_NC = 9  # outward radial contact force on the ball [N]
 
 
 def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -102,13 +154,44 @@ def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     p[P_UREG] = scene.rolling_regularization_speed
     p[P_ROLL] = 1.0 if "rolling_resistance" in scene.effects else 0.0
     p[P_ECC] = 1.0 if "race_eccentricity" in scene.effects else 0.0
+    effects = scene.effects
+    p[P_EXT] = 1.0 if effects & EXTENDED_EFFECTS else 0.0
+    if "gravity" in effects:
+        p[P_GRAV] = scene.gravity_acceleration
+        p[P_GX] = scene.gravity_acceleration * math.cos(scene.gravity_angle)
+        p[P_GY] = scene.gravity_acceleration * math.sin(scene.gravity_angle)
+    if "ball_contact" in effects:
+        p[P_KC] = scene.contact_stiffness
+        p[P_ZC] = scene.contact_damping_ratio
+    rho, nu = scene.fluid_state
+    law, cdre, cubic, plateau = _fluids.law_coefficients(
+        scene.fluid_drag_law, scene.fluid_stokes_drag, scene.fluid_drag_plateau)
+    p[P_DLAW] = law
+    p[P_CD0], p[P_CD1], p[P_CD2], p[P_CD3] = cubic
+    p[P_CDINF] = plateau
+    if "friction" in effects:
+        p[P_FRIC] = 1.0
+        p[P_MUK] = scene.friction_kinetic
+        p[P_MUS] = max(scene.friction_static, scene.friction_kinetic)
+        p[P_UFR] = scene.friction_regularization_speed
+        p[P_USTR] = scene.friction_stribeck_speed
     a = scene.arrays()
+    big_r = scene.race_radius
     b = np.zeros((scene.ball_count, N_BALL_PARAMS))
     b[:, B_MASS] = a["ball_mass"]
     b[:, B_RADIUS] = a["ball_radius"]
     b[:, B_INERTIA] = a["ball_inertia_factor"] * a["ball_mass"] * a["ball_radius"] ** 2
-    b[:, B_BETA] = a["ball_drag"] * scene.race_radius ** 2
+    b[:, B_BETA] = a["ball_drag"] * big_r ** 2
     b[:, B_MUR] = a["ball_rolling_resistance"] / a["ball_radius"]
+    if "virtual_mass" in effects:
+        volume = 4.0 / 3.0 * math.pi * a["ball_radius"] ** 3
+        b[:, B_VM] = scene.fluid_virtual_mass * rho * volume * big_r ** 2
+    if law != _fluids.LAW_NONE:
+        b[:, B_KLIN] = _fluids.stokes_drag_coefficient(cdre, rho, nu, a["ball_radius"])
+        b[:, B_KQUAD] = 0.5 * rho * math.pi * a["ball_radius"] ** 2
+        b[:, B_REU] = 2.0 * a["ball_radius"] / nu
+    b[:, B_MEFF] = (b[:, B_INERTIA] / a["ball_radius"] ** 2 + b[:, B_MASS]
+                    + b[:, B_VM] / big_r ** 2)
     return p, b
 
 
@@ -155,7 +238,9 @@ def mass_matrix(q, p, b):
         mm[0, k] = mm[k, 0] = colx
         mm[1, k] = mm[k, 1] = coly
         mm[2, k] = mm[k, 2] = ci
-        mm[k, k] = ii
+        # the virtual mass of the fluid (0 unless that effect is on) adds to the relative
+        # inertia only: the fluid moves with the rotor otherwise
+        mm[k, k] = ii + b[i, B_VM]
     mm[0, 0] = total
     mm[1, 1] = total
     mm[2, 2] = jt
@@ -168,6 +253,48 @@ def mass_matrix(q, p, b):
 def potential_energy(q, p):
     """Support-spring energy [J]."""
     return 0.5 * (p[P_KX] * q[0] * q[0] + p[P_KY] * q[1] * q[1])
+
+
+@njit(cache=True)
+def gravity_energy(q, p, b):
+    """Gravity potential -g . (sum of mass x position) [J] (0 without gravity).
+
+    The mass-weighted position sum is ``M (x, y) + U0 (cos th, sin th) + sum m_i [E (cos, sin)
+    (th + gam) + R (cos, sin)(th + ph_i)]``; with g along (cos a, sin a) its x-derivative is
+    M g cos a, its th-derivative -g cos a Sx + g sin a Cy (the kernel's generalised forces)."""
+    if p[P_GRAV] == 0.0:
+        return 0.0
+    th = q[2]
+    sx = p[P_MASS] * q[0] + p[P_U0] * math.cos(th)
+    sy = p[P_MASS] * q[1] + p[P_U0] * math.sin(th)
+    for i in range(b.shape[0]):
+        m = b[i, B_MASS]
+        sx += m * p[P_R] * math.cos(th + q[3 + i])
+        sy += m * p[P_R] * math.sin(th + q[3 + i])
+        if p[P_ECC] != 0.0:
+            sx += m * p[P_E] * math.cos(th + p[P_GAM])
+            sy += m * p[P_E] * math.sin(th + p[P_GAM])
+    return -(p[P_GX] * sx + p[P_GY] * sy)
+
+
+@njit(cache=True)
+def _available_torque(lim, w, no_load_speed, power):
+    """Torque limit [N m] at speed ``w`` [rad/s]: a linear torque-speed envelope falling to 0
+    at ``no_load_speed`` and a power limit |T w| <= ``power`` [W] (each only when > 0)."""
+    if no_load_speed > 0.0:
+        lim *= max(0.0, 1.0 - abs(w) / no_load_speed)
+    if power > 0.0 and abs(w) * lim > power:
+        lim = power / abs(w)
+    return lim
+
+
+@njit(cache=True)
+def motor_torque(t, w, d):
+    """Motor torque [N m] of drive row ``d`` at time ``t`` and rotor speed ``w``, clipped to the
+    available torque (:func:`_available_torque`)."""
+    torque = d[D_TORQUE] + d[D_GAIN] * (d[D_TW0] + d[D_TALPHA] * (t - d[D_T0]) - w)
+    lim = _available_torque(d[D_TLIM], w, d[D_WNL], d[D_PLIM])
+    return min(lim, max(-lim, torque))
 
 
 @njit(cache=True)
@@ -191,13 +318,200 @@ def drive_state(t, s, d, nq):
 
 
 @njit(cache=True)
+def _accelerations_ext(t, s, p, b, d, qdd, work):
+    """:func:`accelerations` with the extended effects (gravity, contact, fluid drag, virtual
+    mass, friction, torque-speed envelope); each is evaluated only when its flag is set."""
+    n = b.shape[0]
+    nq = 3 + n
+    x, y = s[0], s[1]
+    vx, vy = s[nq], s[nq + 1]
+    th, w, alpha, torque = drive_state(t, s, d, nq)
+    prescribed = d[D_MODE] == MODE_PRESCRIBED
+    if not prescribed and (d[D_WNL] != 0.0 or d[D_PLIM] != 0.0):
+        torque = motor_torque(t, w, d)
+    ecc = p[P_ECC] != 0.0
+    roll = p[P_ROLL] != 0.0
+    grav = p[P_GRAV] != 0.0
+    touch = p[P_KC] != 0.0
+    dlaw = p[P_DLAW]
+    fric = p[P_FRIC] != 0.0
+    resist = roll or fric
+    gx = p[P_GX]
+    gy = p[P_GY]
+    big_r = p[P_R]
+    if touch:
+        # pair forces first: the contact's radial part loads the race (friction, rolling)
+        _contact.ball_contacts(s, nq, b, B_RADIUS, B_MEFF, big_r, p[P_KC], p[P_ZC], work,
+                               W_QC, W_NC)
+    e = p[P_E]
+    gam = p[P_GAM]
+    w2 = w * w
+    sth = math.sin(th)
+    cth = math.cos(th)
+    total = p[P_MASS]
+    sx = p[P_U0] * sth
+    cy = p[P_U0] * cth
+    fx = -p[P_CX] * vx - p[P_KX] * x + p[P_U0] * cth * w2
+    fy = -p[P_CY] * vy - p[P_KY] * y + p[P_U0] * sth * w2
+    fth = torque - p[P_BETA0] * w
+    jt = p[P_J]
+    if ecc:
+        stg = math.sin(th + gam)
+        ctg = math.cos(th + gam)
+    else:
+        stg = 0.0
+        ctg = 0.0
+    for i in range(n):
+        m = b[i, B_MASS]
+        ph = s[3 + i]
+        dph = s[nq + 3 + i]
+        mr = m * big_r
+        sp = math.sin(th + ph)
+        cp = math.cos(th + ph)
+        colx, coly, ci, ii, jti = _ball_coupling(th, ph, p, b, i)
+        ii += b[i, B_VM]
+        sx -= colx
+        cy += coly
+        jt += jti
+        wrel2 = (w + dph) * (w + dph)
+        fx += mr * wrel2 * cp
+        fy += mr * wrel2 * sp
+        fi = -b[i, B_BETA] * dph
+        if dlaw != 0.0:
+            drag, slope = _fluids.race_drag(big_r * dph, dlaw, b[i, B_KLIN], b[i, B_KQUAD],
+                                            b[i, B_REU], p[P_CD0], p[P_CD1], p[P_CD2],
+                                            p[P_CD3], p[P_CDINF])
+            fi -= drag * big_r
+        if touch:
+            fi += work[i, W_QC]
+        bx = colx
+        by = coly
+        bth = ci
+        if ecc:
+            sgp = math.sin(gam - ph)
+            cgp = math.cos(gam - ph)
+            sx += e * m * stg
+            cy += e * m * ctg
+            fx += e * m * ctg * w2
+            fy += e * m * stg * w2
+            fth -= e * mr * sgp * dph * (2.0 * w + dph)
+            fi += mr * e * sgp * w2
+        if grav:
+            # g m R sin(a - th - ph): the weight's component along the track
+            fi += mr * (gy * cp - gx * sp)
+        if resist:
+            # friction-type forces -coef R N with the race normal force N (module docstring)
+            if roll:
+                kr = b[i, B_MUR] * mr * math.tanh(big_r * dph / p[P_UREG])
+            else:
+                kr = 0.0
+            if fric:
+                kr += mr * friction_coefficient(big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR],
+                                                p[P_USTR])
+            if grav:
+                # |N|: a ball that the weight presses onto the inner wall of the annulus
+                # (N < 0) is still resisted; the sign comes from the velocity-dependent part
+                n0 = big_r * wrel2 + gx * cp + gy * sp
+                if ecc:
+                    n0 += e * w2 * cgp
+                if touch:
+                    n0 += work[i, W_NC] / m
+                if n0 < 0.0:
+                    kr = -kr
+                fi -= kr * (gx * cp + gy * sp)
+            fi -= kr * big_r * wrel2
+            bx -= kr * cp
+            by -= kr * sp
+            if ecc:
+                fi -= kr * e * w2 * cgp
+                bth += kr * e * sgp
+            if touch:
+                fi -= kr * work[i, W_NC] / m
+        work[i, 0] = bx
+        work[i, 1] = by
+        work[i, 2] = bth
+        work[i, 3] = fi
+        work[i, 4] = ii
+        work[i, 5] = colx
+        work[i, 6] = coly
+        work[i, 7] = ci
+    if grav:
+        fx += total * gx
+        fy += total * gy
+        fth += gy * cy - gx * sx
+    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] and its Schur complement
+    a00 = total
+    a01 = 0.0
+    a10 = 0.0
+    a11 = total
+    a02 = -sx
+    a12 = cy
+    a20 = -sx
+    a21 = cy
+    a22 = jt
+    if prescribed:
+        fx -= a02 * alpha
+        fy -= a12 * alpha
+    for i in range(n):
+        bx, by, bth, fi, ii = work[i, 0], work[i, 1], work[i, 2], work[i, 3], work[i, 4]
+        colx, coly, ci = work[i, 5], work[i, 6], work[i, 7]
+        if prescribed:
+            fi -= bth * alpha
+        inv = 1.0 / ii
+        a00 -= colx * bx * inv
+        a01 -= colx * by * inv
+        a10 -= coly * bx * inv
+        a11 -= coly * by * inv
+        fx -= colx * fi * inv
+        fy -= coly * fi * inv
+        if not prescribed:
+            a02 -= colx * bth * inv
+            a12 -= coly * bth * inv
+            a20 -= ci * bx * inv
+            a21 -= ci * by * inv
+            a22 -= ci * bth * inv
+            fth -= ci * fi * inv
+    if prescribed:
+        det = a00 * a11 - a01 * a10
+        ax = (fx * a11 - a01 * fy) / det
+        ay = (a00 * fy - a10 * fx) / det
+        ath = alpha
+    else:
+        c00 = a11 * a22 - a12 * a21
+        c01 = a12 * a20 - a10 * a22
+        c02 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
+        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
+        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
+    qdd[0] = ax
+    qdd[1] = ay
+    qdd[2] = ath
+    for i in range(n):
+        qdd[3 + i] = (work[i, 3] - work[i, 0] * ax - work[i, 1] * ay - work[i, 2] * ath) \
+            / work[i, 4]
+    return torque
+
+
+
+
+@njit(cache=True, inline="always")
 def accelerations(t, s, p, b, d, qdd, work):
     """Fill ``qdd`` (length 3 + n) with the generalised accelerations at state ``s``.
 
-    ``d`` is the drive row of the current segment, ``work`` an (n, 4) scratch array.  With a
-    prescribed drive, th and th' are taken from the drive law (the state's entries are ignored)
-    and qdd[2] is the prescribed acceleration.  Returns the motor torque [N m] (0 if prescribed).
+    ``d`` is the drive row of the current segment, ``work`` an (n, WORK_COLUMNS) scratch
+    array.  With a prescribed drive, th and th' are taken from the drive law (the state's
+    entries are ignored) and qdd[2] is the prescribed acceleration.  Returns the motor torque
+    [N m] (0 if prescribed).
+
+    Scenes with an extended effect on (``p[P_EXT]``) and drives with a torque-speed envelope
+    go to :func:`_accelerations_ext`; everything else runs the code below, which is the kernel
+    as it was before the extension.  One kernel with a flag per effect inside measured 10-20 %
+    slower per right-hand side on scenes that switch nothing on (code size defeats LLVM's
+    inlining of the helpers); the early exit costs ~3 %.
     """
+    if p[P_EXT] != 0.0 or d[D_WNL] != 0.0 or d[D_PLIM] != 0.0:
+        return _accelerations_ext(t, s, p, b, d, qdd, work)
     n = b.shape[0]
     nq = 3 + n
     x, y = s[0], s[1]
@@ -322,9 +636,6 @@ def accelerations(t, s, p, b, d, qdd, work):
     return torque
 
 
-WORK_COLUMNS = 8
-
-
 def make_work(n_balls: int) -> np.ndarray:
     """Scratch array for :func:`accelerations`."""
     return np.zeros((n_balls, WORK_COLUMNS))
@@ -345,25 +656,82 @@ def state_derivative(t, s, p, b, d, ds, qdd, work):
 
 @njit(cache=True)
 def total_energy(s, p, b):
-    """Kinetic plus support-spring energy [J] of state ``s`` (rotor spin included)."""
+    """Kinetic plus potential energy [J] of state ``s`` (rotor spin included): support springs,
+    gravity and the ball-ball contact penalty when those effects are on."""
     nq = 3 + b.shape[0]
     q = s[:nq]
     v = s[nq:]
     mm = mass_matrix(q, p, b)
-    return 0.5 * v @ (mm @ v) + potential_energy(q, p)
+    e = 0.5 * v @ (mm @ v) + potential_energy(q, p)
+    if p[P_GRAV] != 0.0:
+        e += gravity_energy(q, p, b)
+    if p[P_KC] != 0.0:
+        e += _contact.contact_energy(q, b, B_RADIUS, p[P_R], p[P_KC])
+    return e
 
 
 @njit(cache=True)
+def _drag_rates_ext(t, s, p, b, d, lam):
+    """:func:`drag_rates` with the extended effects."""
+    n = b.shape[0]
+    nq = 3 + n
+    th, w, alpha, torque = drive_state(t, s, d, nq)
+    for j in range(2 * nq):
+        lam[j] = 0.0
+    big_r = p[P_R]
+    for i in range(n):
+        m = b[i, B_MASS]
+        r = b[i, B_RADIUS]
+        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r + b[i, B_VM]
+        rate = b[i, B_BETA]
+        dph = s[nq + 3 + i]
+        if p[P_ROLL] != 0.0:
+            ch = math.cosh(big_r * dph / p[P_UREG])
+            rate += b[i, B_MUR] * m * big_r ** 3 * (w + dph) ** 2 / (ch * ch * p[P_UREG])
+        if p[P_DLAW] != 0.0:
+            drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW], b[i, B_KLIN],
+                                            b[i, B_KQUAD], b[i, B_REU], p[P_CD0], p[P_CD1],
+                                            p[P_CD2], p[P_CD3], p[P_CDINF])
+            rate += big_r * big_r * slope
+        if p[P_FRIC] != 0.0:
+            normal = m * big_r * (w + dph) ** 2
+            if p[P_GRAV] != 0.0:
+                normal += m * (p[P_GX] * math.cos(th + s[3 + i])
+                               + p[P_GY] * math.sin(th + s[3 + i]))
+            rate += big_r * big_r * abs(normal) * friction_secant(
+                big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR], p[P_USTR])
+        lam[nq + 3 + i] = rate / ii
+        if p[P_KC] != 0.0:
+            lam[nq + 3 + i] += _contact.contact_rate(s, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC],
+                                                     p[P_ZC])
+
+
+@njit(cache=True, inline="always")
 def drag_rates(t, s, p, b, d, lam):
     """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state size).
 
-    For ball i, lam[ph_i'] = (beta_i + d(rolling force)/d(ph_i')) / I_i: the race drag plus the
-    slope of the smoothed rolling resistance, mu_r m R^3 (th' + ph')^2 sech^2(R ph'/u*) / u*,
-    which grows with the rotor speed squared.  Every other entry is 0.  This is the stiff,
-    nearly diagonal part of the Jacobian (the coupling through the rotor, of relative size
-    m_i / M, is left out); the exponential integrator treats it exactly and the step-size rule
-    of the explicit methods bounds h * lam.
+    For ball i, lam[ph_i'] = (beta_i + d(resisting force)/d(ph_i')) / I_i, the race drag plus:
+
+    * the slope of the smoothed rolling resistance, mu_r m R^3 (th' + ph')^2 sech^2(R ph'/u*)
+      / u*, which grows with the rotor speed squared;
+    * the slope of the nonlinear fluid drag, R^2 dF/du (the Stokes coefficient at low Re);
+    * friction: R^2 |N| mu(u) / u, the *secant* of the friction law (equal to the tangent
+      mu_s |N| / u_reg at u = 0, where stick makes it very stiff).  The secant rather than the
+      tangent because a sliding ball that comes to rest within a step must see its friction
+      as a strong damper, not as the near-zero slope of the saturated tanh;
+    * ball-ball contact: a bound on the contact eigenvalue, sqrt(sum k (1/m_i + 1/m_j)) over
+      the touching neighbours (added directly as a rate).  It is oscillatory rather than a
+      relaxation, so it is not integrated exactly by ``etdrk4``; it is here so that the RK4
+      step rule keeps h omega_c inside RK4's stability region.
+
+    Every other entry is 0.  This is the stiff, nearly diagonal part of the Jacobian (the
+    coupling through the rotor, of relative size m_i / M, is left out); the exponential
+    integrator treats it exactly and the step-size rule of the explicit methods bounds h * lam.
+    Scenes without extended effects run the original code; the rest :func:`_drag_rates_ext`.
     """
+    if p[P_EXT] != 0.0:
+        _drag_rates_ext(t, s, p, b, d, lam)
+        return
     n = b.shape[0]
     nq = 3 + n
     th, w, alpha, torque = drive_state(t, s, d, nq)

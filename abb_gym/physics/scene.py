@@ -40,11 +40,41 @@ drive_torque_limit              N m         motor torque limit, > 0
 drive_max_acceleration          rad/s^2     largest commanded rotor acceleration, > 0
 drive_operating_speed           rad/s       target operating speed, > 0
 housing_clearance               m           largest whirl radius the housing allows, > 0
+gravity_acceleration            m/s^2       gravity in the balancing plane (horizontal-axis rotor),
+                                            in [0, 100]; 0 = vertical axis (off)
+gravity_angle                   rad         direction of gravity in the fixed x-y frame
+                                            (default -pi/2: along -y, so y is "up")
+contact_stiffness               N/m         ball-ball penalty stiffness, >= 0; 0 = no contact
+contact_damping_ratio           -           damping ratio of the contact oscillation, in [0, 10]
+                                            (default 0.5: restitution 0.16)
+fluid_preset                    -           balancer fluid name (abb_gym.physics.fluids.FLUIDS),
+                                            or empty
+fluid_temperature               K           fluid temperature, in [250, 400] (default 298.15);
+                                            only the Table 6.1 oils have a temperature law
+fluid_density                   kg/m^3      explicit density, >= 0 (0 = from the preset)
+fluid_viscosity                 m^2/s       explicit kinematic viscosity, >= 0 (0 = from the preset)
+fluid_drag_law                  -           "linear" (ball_drag only, default), "stokes",
+                                            "jan_chen_1997" or "spannan_2021" (fluids module)
+fluid_stokes_drag               -           c_d Re of the Stokes regime, >= 0 (0 = the law's own)
+fluid_drag_plateau              -           c_d above Re = 2e4 for "spannan_2021", >= 0 (0 = 0.6)
+fluid_virtual_mass              -           virtual-mass coefficient c_vm (eq. 5.23; 2 for a
+                                            sphere at a wall), in [0, 10]; 0 = off
+friction_kinetic                -           kinetic race friction coefficient mu_k, in [0, 1]
+friction_static                 -           static (adherence) coefficient mu_s, 0 or >= mu_k
+friction_regularization_speed   m/s         tanh width u_reg of the friction law, > 0 (1e-4);
+                                            small values make the balls stick
+friction_stribeck_speed         m/s         speed over which mu_s falls to mu_k, > 0 (1e-3)
 ==============================  ==========  ==========================================================
 
-Effects are switched on by their parameters: a scene whose rolling resistance and race
-eccentricity are zero runs a kernel path that never evaluates those terms (see
-:attr:`Scene.effects`).
+YAML sections ``gravity``, ``contact``, ``fluid`` and ``friction`` map to the fields with those
+prefixes (``fluid: {preset: S0.65, drag_law: spannan_2021}``).
+
+Effects are switched on by their parameters, every one off by default: a scene whose rolling
+resistance, race eccentricity, gravity, contact stiffness, fluid drag law, virtual mass and
+friction are zero/"linear" runs a kernel path that never evaluates those terms (see
+:attr:`Scene.effects`; the physics and when each effect matters are documented in
+:mod:`abb_gym.physics.model`, :mod:`~abb_gym.physics.fluids`, :mod:`~abb_gym.physics.friction`
+and :mod:`~abb_gym.physics.contact`).
 """
 from __future__ import annotations
 
@@ -57,6 +87,8 @@ from typing import Any, Mapping
 
 import numpy as np
 import yaml
+
+from . import fluids as _fluids
 
 __all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError"]
 
@@ -89,9 +121,27 @@ _NUMERIC_FIELDS: dict[str, tuple[str, float | None, bool, float | None, bool]] =
     "drive_max_acceleration": ("rad/s^2", 0.0, False, None, False),
     "drive_operating_speed": ("rad/s", 0.0, False, None, False),
     "housing_clearance": ("m", 0.0, False, None, False),
+    # extended physics (each 0 = off; see the module docstring)
+    "gravity_acceleration": ("m/s^2", 0.0, True, 100.0, False),
+    "gravity_angle": ("rad", None, True, None, False),
+    "contact_stiffness": ("N/m", 0.0, True, None, False),
+    "contact_damping_ratio": ("-", 0.0, True, 10.0, False),
+    "fluid_temperature": ("K", 250.0, True, 400.0, False),
+    "fluid_density": ("kg/m^3", 0.0, True, 2.0e4, False),
+    "fluid_viscosity": ("m^2/s", 0.0, True, 1.0, False),
+    "fluid_stokes_drag": ("-", 0.0, True, 1.0e5, False),
+    "fluid_drag_plateau": ("-", 0.0, True, 100.0, False),
+    "fluid_virtual_mass": ("-", 0.0, True, 10.0, False),
+    "friction_kinetic": ("-", 0.0, True, 1.0, False),
+    "friction_static": ("-", 0.0, True, 1.0, False),
+    "friction_regularization_speed": ("m/s", 0.0, False, None, False),
+    "friction_stribeck_speed": ("m/s", 0.0, False, None, False),
 }
+# text fields with a fixed set of values (checked in _validate)
+_TEXT_FIELDS = ("description", "source", "fluid_preset", "fluid_drag_law")
 _SECTION_PREFIX = {"rotor": "rotor", "support": "support", "race": "race", "balls": "ball",
-                   "drive": "drive", "housing": "housing"}
+                   "drive": "drive", "housing": "housing", "gravity": "gravity",
+                   "contact": "contact", "fluid": "fluid", "friction": "friction"}
 # keys that set two fields at once (isotropic support)
 _SHORTCUTS = {"support_stiffness": ("support_stiffness_x", "support_stiffness_y"),
               "support_damping": ("support_damping_x", "support_damping_y")}
@@ -109,6 +159,22 @@ _DEFAULTS: dict[str, Any] = {
     "ball_rolling_resistance": 0.0,
     "ball_angles0": 0.0,
     "rolling_regularization_speed": 1e-3,
+    "gravity_acceleration": 0.0,
+    "gravity_angle": -0.5 * math.pi,
+    "contact_stiffness": 0.0,
+    "contact_damping_ratio": 0.5,
+    "fluid_preset": "",
+    "fluid_temperature": _fluids.T_NOMINAL,
+    "fluid_density": 0.0,
+    "fluid_viscosity": 0.0,
+    "fluid_drag_law": "linear",
+    "fluid_stokes_drag": 0.0,
+    "fluid_drag_plateau": 0.0,
+    "fluid_virtual_mass": 0.0,
+    "friction_kinetic": 0.0,
+    "friction_static": 0.0,
+    "friction_regularization_speed": 1e-4,
+    "friction_stribeck_speed": 1e-3,
 }
 
 
@@ -140,6 +206,22 @@ class Scene:
     ball_rolling_resistance: tuple[float, ...] = (0.0,)
     ball_angles0: tuple[float, ...] = (0.0,)
     rolling_regularization_speed: float = 1e-3
+    gravity_acceleration: float = 0.0
+    gravity_angle: float = -0.5 * math.pi
+    contact_stiffness: float = 0.0
+    contact_damping_ratio: float = 0.5
+    fluid_preset: str = ""
+    fluid_temperature: float = _fluids.T_NOMINAL
+    fluid_density: float = 0.0
+    fluid_viscosity: float = 0.0
+    fluid_drag_law: str = "linear"
+    fluid_stokes_drag: float = 0.0
+    fluid_drag_plateau: float = 0.0
+    fluid_virtual_mass: float = 0.0
+    friction_kinetic: float = 0.0
+    friction_static: float = 0.0
+    friction_regularization_speed: float = 1e-4
+    friction_stribeck_speed: float = 1e-3
     description: str = ""
     source: str = ""
 
@@ -196,7 +278,40 @@ class Scene:
         if (self.support_stiffness_x != self.support_stiffness_y
                 or self.support_damping_x != self.support_damping_y):
             on.add("orthotropic_support")
+        if self.gravity_acceleration > 0:
+            on.add("gravity")
+        if self.contact_stiffness > 0:
+            on.add("ball_contact")
+        if self.fluid_drag_law != "linear":
+            on.add("fluid_drag")
+        if self.fluid_virtual_mass > 0:
+            on.add("virtual_mass")
+        if self.friction_kinetic > 0 or self.friction_static > 0:
+            on.add("friction")
+        if self.friction_static > self.friction_kinetic:
+            on.add("stiction")
         return frozenset(on)
+
+    @property
+    def fluid_state(self) -> tuple[float, float]:
+        """(density [kg/m^3], kinematic viscosity [m^2/s]) of the balancer fluid.
+
+        Explicit ``fluid_density``/``fluid_viscosity`` win; otherwise the preset's values at
+        ``fluid_temperature``; (0, 0) without a fluid."""
+        rho, nu = 0.0, 0.0
+        if self.fluid_preset:
+            rho, nu = _fluids.fluid_properties(self.fluid_preset, self.fluid_temperature)
+        return (self.fluid_density or rho, self.fluid_viscosity or nu)
+
+    def fluid_linear_drag(self, cdre: float | None = None) -> np.ndarray:
+        """Per-ball Stokes-regime race drag C (pi/4) rho nu r [N s/m] of this scene's fluid
+        (Spannan eq. 5.26 divided by R^2): the ``ball_drag`` of the equivalent linear law.
+        ``cdre`` None takes the drag law's own c_d Re."""
+        rho, nu = self.fluid_state
+        law = self.fluid_drag_law if self.fluid_drag_law != "linear" else "stokes"
+        c = _fluids.law_coefficients(law, self.fluid_stokes_drag, self.fluid_drag_plateau)[1] \
+            if cdre is None else cdre
+        return _fluids.stokes_drag_coefficient(c, rho, nu, self.arrays()["ball_radius"])
 
     def replace(self, **overrides: Any) -> "Scene":
         """A copy with some fields changed (validated like a loaded scene)."""
@@ -264,6 +379,56 @@ def _validate(s: Scene) -> None:
     if s.race_eccentricity >= s.race_radius:
         raise SceneError(f"scene {s.name!r}: field 'race_eccentricity' must be < race_radius = "
                          f"{s.race_radius:g} m (got {s.race_eccentricity:g} m)")
+    _validate_extended(s)
+
+
+def _validate_extended(s: Scene) -> None:
+    """Cross-field rules of the extended-physics fields (fluid, friction, contact)."""
+    name = s.name
+    if s.fluid_drag_law not in _fluids.DRAG_LAWS:
+        raise SceneError(f"scene {name!r}: field 'fluid_drag_law' must be one of "
+                         f"{list(_fluids.DRAG_LAWS)} (got {s.fluid_drag_law!r})")
+    if s.fluid_preset and _fluids.canonical_fluid_name(s.fluid_preset) is None:
+        raise SceneError(f"scene {name!r}: field 'fluid_preset' must be one of "
+                         f"{list(_fluids.FLUIDS)} or empty (got {s.fluid_preset!r})")
+    try:
+        rho, nu = s.fluid_state
+    except ValueError as exc:
+        raise SceneError(f"scene {name!r}: field 'fluid_temperature' = {s.fluid_temperature:g} K "
+                         f"does not fit fluid {s.fluid_preset!r}: {exc}") from None
+    try:
+        _fluids.law_coefficients(s.fluid_drag_law, s.fluid_stokes_drag, s.fluid_drag_plateau)
+    except ValueError as exc:
+        raise SceneError(f"scene {name!r}: field 'fluid_stokes_drag'/'fluid_drag_plateau': "
+                         f"{exc}") from None
+    if (s.fluid_drag_law != "linear" or s.fluid_virtual_mass > 0) and rho <= 0:
+        raise SceneError(f"scene {name!r}: fluid_drag_law {s.fluid_drag_law!r} and "
+                         f"fluid_virtual_mass need a fluid: set field 'fluid_preset' (one of "
+                         f"{list(_fluids.FLUIDS)}) or 'fluid_density' > 0 [kg/m^3]")
+    if s.fluid_drag_law != "linear" and nu <= 0:
+        raise SceneError(f"scene {name!r}: fluid_drag_law {s.fluid_drag_law!r} needs field "
+                         f"'fluid_viscosity' > 0 [m^2/s] or a 'fluid_preset'")
+    if 0 < s.friction_static < s.friction_kinetic:
+        raise SceneError(f"scene {name!r}: field 'friction_static' must be >= friction_kinetic "
+                         f"= {s.friction_kinetic:g} (or 0 for no static peak) "
+                         f"(got {s.friction_static:g})")
+    if s.contact_stiffness > 0:
+        big_r = s.race_radius
+        width = sum(2.0 * math.asin(r / big_r) for r in s.ball_radius)
+        if width > 2.0 * math.pi:
+            raise SceneError(f"scene {name!r}: with ball contact the balls must fit in the race: "
+                             f"field 'ball_count' x 'ball_radius' occupy {width:.3f} rad > 2 pi")
+        for i in range(s.ball_count):
+            for j in range(i + 1, s.ball_count):
+                d = (s.ball_angles0[j] - s.ball_angles0[i] + math.pi) % (2 * math.pi) - math.pi
+                chord = 2.0 * big_r * math.sin(0.5 * abs(d))
+                reach = s.ball_radius[i] + s.ball_radius[j]
+                if chord < reach * (1.0 - 1e-9):
+                    raise SceneError(
+                        f"scene {name!r}: field 'ball_angles0' puts balls {i} and {j} into "
+                        f"each other (centre distance {chord:.4g} m < r_i + r_j = {reach:.4g} m); "
+                        f"with ball contact the angles must differ by at least "
+                        f"{2 * math.asin(min(1.0, reach / (2 * big_r))):.4g} rad")
 
 
 def _as_ball_tuple(scene_name: str, name: str, value: Any, count: int) -> tuple[float, ...]:
@@ -304,6 +469,8 @@ def _build(data: Mapping[str, Any], scene_name: str) -> Scene:
                 v = _check_number(scene_name, name, v)
         elif not isinstance(v, str):
             raise SceneError(f"scene {scene_name!r}: field {name!r} must be text (got {v!r})")
+        elif name == "fluid_preset" and v:
+            v = _fluids.canonical_fluid_name(v) or v
         kwargs[name] = v
     return Scene(**kwargs)
 
