@@ -31,10 +31,18 @@ work        (N, n, WORK_COLUMNS)   scratch of :func:`model.accelerations`
 ==========  =====================  ===========================================================
 
 Workspaces are passed in (never allocated per step) so that the batch loop does no allocation.
+
+Compiled-cache hygiene: numba's on-disk cache of a function is invalidated only when the file
+that defines it changes, not when a function it calls (``model.state_derivative`` in another
+file) does.  :func:`flush_stale_caches` therefore keeps a fingerprint of every module of
+``abb_gym/physics`` next to the cache and flushes the given functions' caches when it changes;
+this module and :mod:`abb_gym.envs.core` call it on import for their kernels.
 """
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
@@ -42,7 +50,8 @@ from numba import njit, prange
 from . import integrators as integ
 from . import model as mdl
 
-__all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS", "WS_BACKUP"]
+__all__ = ["advance", "run_batch", "make_workspace", "flush_stale_caches", "WS_ROWS",
+           "WS_BACKUP"]
 
 WS_ROWS = 7
 WS_BACKUP = 6  # row of ``ws`` that callers may use to keep the state at the interval start
@@ -60,8 +69,10 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
 
     ``seg_d`` holds ``nseg`` drive rows, ``j`` is the index of the current row (as returned by
     the previous call), ``ws`` a (>= 6, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
-    ``whirl[0]`` is incremented by the integral of the whirl radius over the substeps
-    (right-endpoint rule) and ``whirl[1]`` raised to the largest whirl radius seen.
+    ``whirl`` (length 4) accumulates over the substeps (right-endpoint rule): ``whirl[0]`` +=
+    the integral of the deflection from the rest position ``(whirl[2], whirl[3])`` (the static
+    sag under gravity, else 0), ``whirl[1]`` = max(whirl[1], largest whirl radius
+    sqrt(x^2 + y^2) measured from the bearing axis).
 
     Returns ``(status, j, failure time, index of the first non-finite entry, steps)``; status 0
     is ok, 1 (``integrators.STATUS_NONFINITE``) means the state became non-finite; ``s`` then
@@ -91,8 +102,10 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
             bad = integ._first_nonfinite(s)
             if bad >= 0:
                 return integ.STATUS_NONFINITE, j, ti + h, bad, steps
+            dx = s[0] - whirl[2]
+            dy = s[1] - whirl[3]
+            whirl[0] += math.sqrt(dx * dx + dy * dy) * h
             r = math.sqrt(s[0] * s[0] + s[1] * s[1])
-            whirl[0] += r * h
             if r > whirl[1]:
                 whirl[1] = r
         t = piece_end
@@ -114,7 +127,7 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
     for e in prange(n_env):
         s = ws[e, WS_BACKUP]
         s[:] = s0[e]
-        whirl = np.zeros(2)
+        whirl = np.zeros(4)
         j = 0
         ns_e = nseg[e]
         while j + 1 < ns_e and seg_d[e, j + 1, mdl.D_T0] <= t_out[0]:
@@ -136,3 +149,36 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
         status[e, 1] = t_fail
         status[e, 2] = bad
         status[e, 3] = total
+
+
+def physics_fingerprint() -> str:
+    """SHA-1 over the sources of every module in ``abb_gym/physics``."""
+    h = hashlib.sha1()
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def flush_stale_caches(tag: str, *dispatchers) -> bool:
+    """Flush the numba caches of ``dispatchers`` if the physics sources changed since they
+    were written (see the module docstring).  Returns True if it flushed.  Never raises: cache
+    housekeeping must not break an import (a read-only install simply keeps its cache)."""
+    try:
+        caches = [d._cache for d in dispatchers if hasattr(d._cache, "cache_path")]
+        if not caches:
+            return False
+        stamp = Path(caches[0].cache_path) / f"{tag}.physics-fingerprint"
+        fingerprint = physics_fingerprint()
+        if stamp.exists() and stamp.read_text() == fingerprint:
+            return False
+        for cache in caches:
+            cache.flush()
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(fingerprint)
+        return True
+    except Exception:  # pragma: no cover - unwritable cache folder and the like
+        return False
+
+
+flush_stale_caches("batch", advance, run_batch)

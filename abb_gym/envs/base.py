@@ -1,0 +1,333 @@
+"""Base class of the balancer environments: observation, reward, episode, info, rendering.
+
+The three environments differ only in their action (see :mod:`abb_gym.envs.torque`,
+:mod:`abb_gym.envs.speed`, :mod:`abb_gym.envs.dwell`); everything below is shared.  The
+physics is the compiled model of :mod:`abb_gym.physics.model`, advanced by the production RK4
+(:func:`abb_gym.physics.batch.advance`, bit-compatible with ``simulate(method="rk4")``).
+"""
+from __future__ import annotations
+
+import textwrap
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import logger
+
+from . import core
+from .core import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_BAL, O_EFFORT, O_FAIL, O_FCODE,
+                   O_IMB, O_R, O_RDYN, O_RESID, O_REWARD, O_TERM, O_TIME, O_TRUNC, O_VIB, S_K,
+                   S_NSETTLE, S_PEAK, S_REACHED, S_T_REACH, Buffers, EnvSetup)
+from .rendering import Renderer
+
+COMMON_DOC = textwrap.dedent(r"""
+    ## Observation Space
+
+    A flat ``Box(obs_dim,)`` of float32: what a drive with a vibration sensor measures, every
+    entry normalised and clipped to the bounds below.  ``A_v`` is the steady whirl amplitude at
+    resonance of the same rotor without balls, with the scene's imbalance (a fixed scale per
+    environment), ``c`` the housing clearance, ``w_op`` the operating speed.
+
+    | Index | Name | Definition | Bounds |
+    |-------|------|------------|--------|
+    | 0 | rotor_speed | w / w_op | [0, 1]; RunUpTorque [-overspeed, overspeed] |
+    | 1 | vibration_x | (x - x_rest) / A_v, housing displacement, fixed frame | [-c/A_v, c/A_v] |
+    | 2 | vibration_y | (y - y_rest) / A_v | [-c/A_v, c/A_v] |
+    | 3 | vibration_amplitude | filtered whirl radius / A_v | [0, c/A_v] |
+    | 4 | time_fraction | t / episode_length | [0, 1] |
+    | 5 .. 4+A | last_action | the last action after clipping | [-1, 1] |
+    | 5+A .. | cos, sin(ball_angle[i]) | only with ``observe_balls=True`` | [-1, 1] |
+
+    A is the action size (1; DwellProfile 3).  ``(x_rest, y_rest)`` is the rest position of
+    the rotor centre: the origin, or the static sag under gravity (horizontal-axis scenes);
+    the vibration radius is the distance from it (equal to the whirl radius without gravity).
+    The vibration amplitude is the vibration radius passed through a first-order low-pass of
+    time constant ``vibration_filter_time``.  Ball angles are measured from the imbalance.
+
+    ## Rewards
+
+    Per control interval of length dt; ``T_ref = w_op / drive_max_acceleration`` (the fastest
+    run-up the drive allows) makes the terms comparable between machines.  The weights ``w_*``
+    come from the preset (``reward:`` section).  Each term is reported in
+    ``info["reward_terms"]``; the reward is their sum (in the order listed).
+
+    | Term | Value per interval |
+    |------|--------------------|
+    | vibration | -w_vibration * (r_mean / A_peak) * dt / T_ref |
+    | time | -w_time * dt / T_ref, if the interval ends not at operating speed |
+    | effort | -w_effort * integral(u^2 dt) / T_ref |
+    | residual | terminal: -w_residual * mean(r_mean / A_op) over the intervals at speed |
+    | failure | terminal: -(w_failure + R_max * (T_episode - t) / T_ref + w_residual * c / A_op) |
+
+    * ``r_mean``: the vibration radius averaged over the interval's RK4 steps.
+    * ``A_peak``, ``A_op``: the reference "same rotor without balls" (mass ``rotor_mass``, the
+      scene's support, this episode's imbalance U): the steady Jeffcott amplitude
+      ``U w^2 / sqrt((k - m w^2)^2 + (c w)^2)`` (larger of the two axes), at its peak over
+      [0, w_op] and at w_op.  A residual ratio of 1 is no better than without balls.
+    * "At operating speed": ``|w - w_op| <= at_speed_tolerance * w_op``.
+    * ``u``: torque / torque limit (RunUpTorque) or applied acceleration /
+      drive_max_acceleration (RunUpSpeed, DwellProfile).
+    * residual: paid on success, and also at truncation - over the at-speed intervals so far,
+      or at its bound ``w_residual * c / A_op`` if the operating speed was never reached - so a
+      run-up too slow to finish never pays.
+    * failure: ``R_max = w_vibration c / A_peak + w_time + w_effort u_max^2`` bounds the
+      penalty rate of any continuation (the whirl cannot exceed c without failing), so the
+      failure term is worse than every way of carrying on: ending early never pays.
+
+    ## Starting State
+
+    The rotor is at rest at its rest position (x = y = 0; under gravity the static sag
+    x = M g_x / k_x, y = M g_y / k_y), all speeds 0.  The rotor angle is the
+    imbalance phase, the balls sit at their initial angles (measured from the imbalance).  The
+    imbalance magnitude and phase, ball angles, race drag and rolling resistance are drawn from
+    the preset's ``randomize`` ranges with ``self.np_random``; ``reset(options=...)`` sets exact
+    values: ``imbalance`` [kg m] or ``imbalance_ratio`` (x balancing capacity),
+    ``imbalance_phase`` [rad], ``ball_angles`` [rad], ``ball_drag_scale``,
+    ``rolling_resistance_scale``.
+
+    ## Episode End
+
+    * terminated, success: the rotor has spent ``settle_time`` at operating speed (the
+      settling window; intervals away from the speed do not count).  The residual term is paid.
+    * terminated, failure: the whirl radius (measured from the bearing axis, as the scene's
+      clearance is) exceeded the housing clearance at an RK4 step, the rotor tripped
+      the overspeed limit (RunUpTorque only), or the state became non-finite.  The failure
+      term is paid and ``info["failure"]`` says what happened; the observation is that of the
+      last finite state.
+    * truncated: ``episode_length`` has elapsed; the residual term is paid (see Rewards).
+      The environment truncates itself (episode
+      lengths depend on the scene); the ``max_episode_steps`` registered with gymnasium is a
+      backstop that never cuts an episode of a shipped preset.
+
+    ## Info
+
+    | Key | Meaning |
+    |-----|---------|
+    | reward_terms | dict vibration, time, effort, residual, failure (sum = reward) |
+    | time | simulated time [s] |
+    | rotor_speed | [rad/s] |
+    | whirl_radius | sqrt(x^2 + y^2) [m] |
+    | whirl_ratio | whirl radius / the episode's reference length (Yoshida's W_r / e) |
+    | vibration_radius | distance of the rotor centre from its rest position [m] |
+    | peak_whirl_radius | largest whirl radius so far [m] |
+    | ball_angles | ball angles from the imbalance, unwrapped [rad] |
+    | run_up_finished | the operating speed has been reached |
+    | time_to_speed | time it was first reached [s] (0 until then) |
+    | time_at_speed | time spent at operating speed [s] |
+    | balanced | residual imbalance within ``balance_tolerance`` of the best the balls can do |
+    | residual_imbalance_ratio | abs(U0 + sum m_i (E e^{i gam} + R e^{i ph_i})) / U0 |
+    | failure | only on a failure: what happened |
+
+    At reset, ``info`` also holds the episode's parameters (``imbalance``, ``imbalance_phase``,
+    ``initial_ball_angles``, ``ball_drag_scale``, ``rolling_resistance_scale``,
+    ``integration_step``, ``static_deflection``); ``env.unwrapped.episode_scene`` is the
+    episode as a Scene.
+
+    ## Arguments
+
+    ``scene`` (name, path or Scene; default "yoshida_odd"), ``preset`` (name in
+    ``configs/envs``, path, dict or EnvConfig; default "train"), ``observe_balls`` (False),
+    ``render_mode`` (None, "rgb_array", "human"), ``max_episode_steps`` (backstop, None), and any
+    preset field as a keyword (``control_interval=0.02``, ``reward={"time": 2.0}``, ...).
+
+    ## Bad input
+
+    Actions outside [-1, 1] are clipped with a warning the first time.  Non-finite actions
+    (NaN, inf) are rejected with a ``ValueError`` and the state is left unchanged.  An action
+    of the wrong shape raises ``ValueError``.
+""")
+__doc__ += COMMON_DOC
+
+
+class BalancerEnv(gym.Env):
+    """Common implementation; use the registered subclasses."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    kind = "speed"
+
+    def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,
+                 observe_balls: bool = False, render_mode: str | None = None,
+                 max_episode_steps: int | None = None, **overrides: Any):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of "
+                             f"{self.metadata['render_modes']} (got {render_mode!r})")
+        self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
+                              overrides)
+        self.observation_space = self.setup.observation_space
+        self.action_space = self.setup.action_space
+        self.render_mode = render_mode
+        # one frame per control interval plays back in real time
+        self.metadata = dict(self.metadata,
+                             render_fps=max(1, round(1.0 / self.setup.control_interval)))
+        self._bufs = Buffers(self.setup, 1, n_trace=1 if render_mode else 0)
+        self._renderer: Renderer | None = None
+        self._episode: core.Episode | None = None
+        self._done = False
+        self._warned_clip = False
+        self._warned_done = False
+        self.last_profile = None
+        self._bind()
+
+    # ------------------------------------------------------------------ internals
+    def _bind(self) -> None:
+        """Cache views and the kernel argument tuple (rebuilt after unpickling)."""
+        bf = self._bufs
+        self._args = bf.kernel_args()
+        self._act_row = bf.act[0]
+        self._obs_row = bf.obs[0]
+        self._out_row = bf.out[0]
+        self._st_row = bf.st[0]
+        self._s_row = bf.s[0]
+        nq = 3 + self.setup.scene.ball_count
+        self._nq = nq
+        self._dt = self.setup.control_interval
+        self._ref_len = self.setup.scene.reference_length
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        for key in ("_renderer", "_args", "_act_row", "_obs_row", "_out_row", "_st_row",
+                    "_s_row"):
+            state.pop(key, None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._renderer = None
+        self._bind()
+
+    @property
+    def scene(self):
+        """The environment's nominal scene (episodes may randomise it: ``episode_scene``)."""
+        return self.setup.scene
+
+    @property
+    def config(self):
+        """The resolved preset (:class:`abb_gym.envs.config.EnvConfig`)."""
+        return self.setup.config
+
+    @property
+    def episode_scene(self):
+        """The current episode as a Scene (randomised imbalance, drag, rolling resistance)."""
+        return None if self._episode is None else self._episode.scene
+
+    @property
+    def episode(self) -> core.Episode | None:
+        """The current episode's parameters."""
+        return self._episode
+
+    @property
+    def integration_step(self) -> float | None:
+        """RK4 step bound of the current episode [s]."""
+        return None if self._episode is None else self._episode.integration_step
+
+    @property
+    def observation_names(self) -> list[str]:
+        """Names of the observation entries, in order (see the Observation Space table)."""
+        return list(self.setup.obs_names)
+
+    @property
+    def state(self) -> np.ndarray:
+        """Copy of the model state ``[x, y, th, ph_1..n, x', y', th', ph_1'..n']``."""
+        return self._s_row.copy()
+
+    # ------------------------------------------------------------------ API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        ep = self.setup.draw_episode(self.np_random, options)
+        self.setup.write_episode(self._bufs, 0, ep)
+        self._bufs.observe(np.zeros(1, dtype=np.int64))
+        self._episode = ep
+        self._ref_len = ep.scene.reference_length
+        self._done = False
+        self.last_profile = None
+        info = self._info()
+        info.update(ep.as_info())
+        if self.render_mode == "human":
+            self.render()
+        return self._obs_row.copy(), info
+
+    def _write_action(self, action) -> None:
+        try:
+            self._act_row[:] = action
+        except (ValueError, TypeError):
+            raise ValueError(f"action must be an array of shape {self.action_space.shape} in "
+                             f"[-1, 1] (got {action!r})") from None
+
+    def step(self, action):
+        if self._episode is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        if self._done and not self._warned_done:
+            logger.warn("step() called after the episode ended (terminated or truncated); "
+                        "it returns the last observation with reward 0 - call reset()")
+            self._warned_done = True
+        self._write_action(action)
+        core.step_serial(*self._args)
+        out = self._out_row.tolist()
+        flag = out[O_ACTFLAG]
+        if flag:
+            self._action_flag(flag, out, action)
+        terminated = out[O_TERM] != 0.0
+        truncated = out[O_TRUNC] != 0.0
+        self._done = terminated or truncated
+        info = self._info(out)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs_row.copy(), out[O_REWARD], terminated, truncated, info
+
+    def _action_flag(self, flag: float, out: list, action) -> None:
+        if flag == ACT_NONFINITE:
+            raise ValueError(f"action must be finite; entry {int(out[core.O_FINDEX])} of "
+                             f"{action!r} is not (the step was not taken)")
+        if flag == ACT_CLIPPED and not self._warned_clip:
+            logger.warn(f"action {action!r} outside [-1, 1] was clipped (warned once)")
+            self._warned_clip = True
+
+    def _info(self, out: list | None = None) -> dict[str, Any]:
+        if out is None:
+            out = self._out_row.tolist()
+        st = self._st_row.tolist()
+        s = self._s_row
+        nq = self._nq
+        r = out[O_R]
+        info = {
+            "reward_terms": {"vibration": out[O_VIB], "time": out[O_TIME],
+                             "effort": out[O_EFFORT], "residual": out[O_RESID],
+                             "failure": out[O_FAIL]},
+            "time": st[S_K] * self._dt,
+            "rotor_speed": float(s[nq + 2]),
+            "whirl_radius": r,
+            "whirl_ratio": r / self._ref_len,
+            "vibration_radius": out[O_RDYN],
+            "peak_whirl_radius": st[S_PEAK],
+            "ball_angles": s[3:nq].copy(),
+            "run_up_finished": st[S_REACHED] != 0.0,
+            "time_to_speed": st[S_T_REACH],
+            "time_at_speed": st[S_NSETTLE] * self._dt,
+            "balanced": out[O_BAL] != 0.0,
+            "residual_imbalance_ratio": out[O_IMB],
+        }
+        code = int(out[O_FCODE])
+        if code:
+            info["failure"] = self.setup.failure_message(code, self._out_row, self._st_row,
+                                                         self._s_row)
+        return info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; create the environment "
+                            "with render_mode='rgb_array' or 'human'")
+            return None
+        if self._renderer is None:
+            self._renderer = Renderer(self.setup.scene, self.setup.operating_speed,
+                                      self.setup.episode_length, self.render_mode)
+        bf = self._bufs
+        if bf.trace.shape[0] == 0:
+            bf.trace = np.zeros((1, self.setup.max_steps + 1, 4))
+            self._bind()
+        k = int(self._st_row[S_K]) if self._episode is not None else 0
+        return self._renderer.draw(self._s_row, bf.trace[0, :k + 1])
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,346 @@
+"""Native vector environments: ``num_envs`` balancers advanced by one parallel compiled call.
+
+``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` returns one of
+these.  All sub-environments share the scene, the preset and the action type; each has its
+own episode parameters, random generator and state.  One ``step`` runs
+:func:`abb_gym.envs.core.step_parallel`, which advances every sub-environment with the same
+compiled per-environment function as the single environment (``numba.prange`` over
+environments, one thread pool launch per step), so sub-environment ``i`` and a single
+environment reset with the same seed follow the same trajectory bit for bit.
+
+## Seeding
+
+As ``SyncVectorEnv``: ``reset(seed=s)`` seeds sub-environment ``i`` with ``s + i``; a list
+gives one seed per sub-environment; ``None`` keeps each generator (creating it from fresh
+entropy the first time).  Every draw of sub-environment ``i`` comes from its own generator,
+in the order the single environment draws, so the episodes match ``N`` single environments.
+
+## Autoreset
+
+``AutoresetMode.NEXT_STEP`` (gymnasium's default): the step after a sub-environment
+terminated or truncated resets it instead of stepping it - its action is ignored, it returns
+the first observation of the new episode with reward 0 and both flags False.
+
+## Options
+
+``reset(options=...)`` takes the single environment's options; a value applies to every
+sub-environment, or give one value per sub-environment (an array of length ``num_envs``;
+``ball_angles`` as an array of shape ``(num_envs, ball_count)``).  ``options["reset_mask"]``
+(boolean array) resets only the selected sub-environments.
+
+## Info
+
+The single environment's keys as arrays of length ``num_envs`` with gymnasium's ``_key``
+masks; ``reward_terms`` is a dict of arrays.  ``failure`` (object array of messages) appears
+in steps where some sub-environment failed, masked by ``_failure``; the episode parameters
+(``imbalance``, ...) appear for the sub-environments reset in that step.
+
+## Actions
+
+``actions`` of shape ``(num_envs,) + single_action_space.shape``.  Non-finite entries are
+rejected with a ``ValueError`` before anything moves; entries outside [-1, 1] are clipped with
+a one-time warning.
+
+## Rendering
+
+``render_mode="rgb_array"``: ``render()`` returns a tuple of frames of the first
+``min(num_envs, 4)`` sub-environments.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import logger
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from . import core
+from .core import (O_BAL, O_EFFORT, O_FAIL, O_FCODE, O_IMB, O_R, O_RDYN, O_RESID, O_REWARD,
+                   O_TERM, O_TIME, O_TRUNC, O_VIB, S_K, S_NSETTLE, S_PEAK, S_REACHED,
+                   S_T_REACH, Buffers, EnvSetup)
+from .rendering import Renderer
+
+__all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
+           "DwellProfileVectorEnv"]
+
+MAX_RENDERED = 4
+
+
+class BalancerVectorEnv(VectorEnv):
+    """Native vector environment; use the registered subclasses (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25,
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
+    kind = "speed"
+
+    def __init__(self, num_envs: int = 1, scene: Any = "yoshida_odd", preset: Any = "train", *,
+                 observe_balls: bool = False, render_mode: str | None = None,
+                 max_episode_steps: int | None = None, **overrides: Any):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
+                or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of "
+                             f"{self.metadata['render_modes']} (got {render_mode!r})")
+        self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
+                              overrides)
+        self.num_envs = int(num_envs)
+        self.render_mode = render_mode
+        self.single_observation_space = self.setup.observation_space
+        self.single_action_space = self.setup.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        n_trace = min(self.num_envs, MAX_RENDERED) if render_mode else 0
+        self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace)
+        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self._episodes: list[core.Episode | None] = [None] * self.num_envs
+        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._started = False
+        self._warned_clip = False
+        self._renderers: list[Renderer] | None = None
+        self._dt = self.setup.control_interval
+        self._nq = 3 + self.setup.scene.ball_count
+        self._ref_len = np.full(self.num_envs, self.setup.scene.reference_length)
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderers"] = None
+        return state
+
+    @property
+    def scene(self):
+        return self.setup.scene
+
+    @property
+    def config(self):
+        return self.setup.config
+
+    def episode_scene(self, i: int):
+        """Sub-environment ``i``'s current episode as a Scene."""
+        ep = self._episodes[i]
+        return None if ep is None else ep.scene
+
+    @property
+    def states(self) -> np.ndarray:
+        """Copy of the model states, shape (num_envs, state length)."""
+        return self._bufs.s.copy()
+
+    # ------------------------------------------------------------------ API
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None):
+        n = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            super().reset(seed=int(seed))
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed must be None, an int or a list of num_envs = {n} seeds "
+                                 f"(got {len(seeds)})")
+        options = dict(options) if options else {}
+        mask = options.pop("reset_mask", None)
+        if mask is None:
+            rows = np.arange(n)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (n,) or mask.dtype != np.bool_ or not mask.any():
+                raise ValueError(f"options['reset_mask'] must be a boolean array of shape "
+                                 f"({n},) with at least one True value")
+            if not self._started and not mask.all():
+                raise ValueError("the first reset() must reset every sub-environment")
+            rows = np.flatnonzero(mask)
+        for i in rows:
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(seeds[i])
+            self._reset_row(int(i), self._options_for(int(i), options))
+        self._bufs.observe(rows)
+        self._prev_done[rows] = False
+        self._started = True
+        info = self._info(np.ones(n, dtype=bool) if mask is None else mask, reset_rows=rows)
+        return self._bufs.obs.copy(), info
+
+    def _options_for(self, i: int, options: dict[str, Any]) -> dict[str, Any] | None:
+        if not options:
+            return None
+        out = {}
+        n = self.num_envs
+        nb = self.setup.scene.ball_count
+        for key, value in options.items():
+            arr = np.asarray(value) if not isinstance(value, str) else None
+            if key == "ball_angles" and arr is not None and arr.ndim == 2:
+                if arr.shape[0] != n:
+                    raise ValueError(f"reset option 'ball_angles' must have shape ({nb},) or "
+                                     f"({n}, {nb}) (got {arr.shape})")
+                out[key] = arr[i]
+            elif key != "ball_angles" and arr is not None and arr.ndim == 1:
+                if arr.shape[0] != n:
+                    raise ValueError(f"reset option {key!r} must be one value or num_envs = "
+                                     f"{n} values (got {arr.shape[0]})")
+                out[key] = arr[i]
+            else:
+                out[key] = value
+        return out
+
+    def _reset_row(self, i: int, options: dict[str, Any] | None) -> None:
+        ep = self.setup.draw_episode(self._rngs[i], options)
+        self.setup.write_episode(self._bufs, i, ep)
+        self._episodes[i] = ep
+        self._ref_len[i] = ep.scene.reference_length
+
+    def step(self, actions):
+        if not self._started:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        bf = self._bufs
+        n = self.num_envs
+        shape = (n,) + self.single_action_space.shape
+        try:
+            a = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"actions must be an array of shape {shape} (got {actions!r})"
+                             ) from None
+        if a.shape != shape:
+            if a.size != n * self.setup.n_actions:
+                raise ValueError(f"actions must be an array of shape {shape} (got shape "
+                                 f"{a.shape})")
+            a = a.reshape(shape)
+        finite = np.isfinite(a)
+        if not finite.all():
+            bad = np.argwhere(~finite)[0]
+            raise ValueError(f"actions must be finite; entry {tuple(int(v) for v in bad)} is "
+                             f"not (no sub-environment was stepped)")
+        if not self._warned_clip and (a.max() > 1.0 or a.min() < -1.0):
+            logger.warn("actions outside [-1, 1] were clipped (warned once)")
+            self._warned_clip = True
+        rows = np.flatnonzero(self._prev_done)
+        if rows.size:
+            for i in rows:
+                self._reset_row(int(i), None)
+            bf.active[:] = 1
+            bf.active[rows] = 0
+        bf.act[:] = a.reshape(n, -1)
+        if self.kind == "dwell":
+            clipped = np.clip(bf.act, -1.0, 1.0)
+            bf.act[:] = clipped
+            for i in range(n):
+                if bf.active[i]:
+                    profile, _ = self.setup.dwell_profile(clipped[i],
+                                                          self._episodes[i].imbalance_phase)
+                    self.setup.write_dwell_rows(bf, i, profile)
+        core.step_parallel(*bf.kernel_args())
+        if rows.size:
+            bf.observe(rows)
+            bf.active[:] = 1
+        out = bf.out
+        terminated = out[:, O_TERM] != 0.0
+        truncated = out[:, O_TRUNC] != 0.0
+        reward = out[:, O_REWARD].copy()
+        self._prev_done = terminated | truncated
+        mask = np.ones(n, dtype=bool)
+        info = self._info(mask, reset_rows=rows)
+        return bf.obs.copy(), reward, terminated, truncated, info
+
+    def _info(self, mask: np.ndarray, reset_rows: np.ndarray) -> dict[str, Any]:
+        bf = self._bufs
+        out, st, s = bf.out, bf.st, bf.s
+        nq = self._nq
+        r = out[:, O_R].copy()
+        info: dict[str, Any] = {}
+
+        def put(key, value):
+            info[key] = value
+            info["_" + key] = mask.copy()
+
+        terms = {}
+        for name, col in (("vibration", O_VIB), ("time", O_TIME), ("effort", O_EFFORT),
+                          ("residual", O_RESID), ("failure", O_FAIL)):
+            terms[name] = out[:, col].copy()
+            terms["_" + name] = mask.copy()
+        put("reward_terms", terms)
+        put("time", st[:, S_K] * self._dt)
+        put("rotor_speed", s[:, nq + 2].copy())
+        put("whirl_radius", r)
+        put("whirl_ratio", r / self._ref_len)
+        put("vibration_radius", out[:, O_RDYN].copy())
+        put("peak_whirl_radius", st[:, S_PEAK].copy())
+        put("ball_angles", s[:, 3:nq].copy())
+        put("run_up_finished", st[:, S_REACHED] != 0.0)
+        put("time_to_speed", st[:, S_T_REACH].copy())
+        put("time_at_speed", st[:, S_NSETTLE] * self._dt)
+        put("balanced", out[:, O_BAL] != 0.0)
+        put("residual_imbalance_ratio", out[:, O_IMB].copy())
+        codes = out[:, O_FCODE]
+        if codes.any():
+            msgs = np.full(self.num_envs, None, dtype=object)
+            failed = codes != 0
+            for i in np.flatnonzero(failed):
+                msgs[i] = self.setup.failure_message(int(codes[i]), out[i], st[i], s[i])
+            info["failure"] = msgs
+            info["_failure"] = failed
+        if len(reset_rows):
+            rmask = np.zeros(self.num_envs, dtype=bool)
+            rmask[reset_rows] = True
+            keys = ("imbalance", "imbalance_phase", "ball_drag_scale",
+                    "rolling_resistance_scale", "integration_step")
+            for key in keys:
+                arr = np.zeros(self.num_envs)
+                for i in reset_rows:
+                    arr[i] = getattr(self._episodes[i], key)
+                info[key] = arr
+                info["_" + key] = rmask.copy()
+            angles = np.zeros((self.num_envs, nq - 3))
+            sag = np.zeros((self.num_envs, 2))
+            for i in reset_rows:
+                angles[i] = self._episodes[i].ball_angles
+                sag[i] = self._episodes[i].static_deflection
+            info["initial_ball_angles"] = angles
+            info["_initial_ball_angles"] = rmask.copy()
+            info["static_deflection"] = sag
+            info["_static_deflection"] = rmask.copy()
+        return info
+
+    def render(self):
+        if self.render_mode is None:
+            logger.warn("render() called without a render_mode; create the vector environment "
+                        "with render_mode='rgb_array'")
+            return None
+        k = min(self.num_envs, MAX_RENDERED)
+        if self._renderers is None:
+            self._renderers = [Renderer(self.setup.scene, self.setup.operating_speed,
+                                        self.setup.episode_length, "rgb_array")
+                               for _ in range(k)]
+        bf = self._bufs
+        frames = []
+        for i in range(k):
+            steps = int(bf.st[i, S_K])
+            frames.append(self._renderers[i].draw(bf.s[i], bf.trace[i, :steps + 1]))
+        return tuple(frames)
+
+    def close_extras(self, **kwargs):
+        if self._renderers:
+            for r in self._renderers:
+                r.close()
+        self._renderers = None
+
+
+class RunUpTorqueVectorEnv(BalancerVectorEnv):
+    """Vector version of ``abb_gym/RunUpTorque-v0`` (see :mod:`abb_gym.envs.torque`)."""
+
+    kind = "torque"
+
+
+class RunUpSpeedVectorEnv(BalancerVectorEnv):
+    """Vector version of ``abb_gym/RunUpSpeed-v0`` (see :mod:`abb_gym.envs.speed`)."""
+
+    kind = "speed"
+
+
+class DwellProfileVectorEnv(BalancerVectorEnv):
+    """Vector version of ``abb_gym/DwellProfile-v0`` (see :mod:`abb_gym.envs.dwell`)."""
+
+    kind = "dwell"

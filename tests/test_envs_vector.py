@@ -1,0 +1,159 @@
+"""Native vector environments: agreement with single environments (autoreset included),
+seeding, options, bad actions, rendering, pickling."""
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import abb_gym  # noqa: F401  (registers the ids)
+from abb_gym.envs import ENV_IDS, BalancerVectorEnv
+
+SHORT = {"episode_length": 0.3, "settle_time": 0.05}
+
+
+def make_vec(env_id, n, **kw):
+    return gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **kw)
+
+
+def compare_with_singles(env_id, n, steps, seed, actions, **kw):
+    """Step the vector env and n single envs side by side (NEXT_STEP autoreset)."""
+    vec = make_vec(env_id, n, **kw)
+    singles = [gym.make(env_id, **kw) for _ in range(n)]
+    obs, info = vec.reset(seed=seed)
+    done = np.zeros(n, dtype=bool)
+    for i, env in enumerate(singles):
+        o, inf = env.reset(seed=seed + i)
+        assert np.array_equal(obs[i], o)
+        assert info["imbalance"][i] == inf["imbalance"]
+    resets = ends = 0
+    for k in range(steps):
+        a = actions[k]
+        obs, rew, term, trunc, info = vec.step(a)
+        for i, env in enumerate(singles):
+            if done[i]:
+                o, inf = env.reset()
+                r, te, tr = 0.0, False, False
+                resets += 1
+                assert info["_imbalance"][i] and info["imbalance"][i] == inf["imbalance"]
+            else:
+                o, r, te, tr, inf = env.step(a[i])
+                for name, v in inf["reward_terms"].items():
+                    assert info["reward_terms"][name][i] == v
+                if "failure" in inf:
+                    assert info["_failure"][i] and info["failure"][i] == inf["failure"]
+            assert np.array_equal(obs[i], o), (k, i)
+            assert rew[i] == r and term[i] == te and trunc[i] == tr, (k, i)
+            assert info["rotor_speed"][i] == inf["rotor_speed"]
+            assert info["whirl_radius"][i] == inf["whirl_radius"]
+            assert info["whirl_ratio"][i] == inf["whirl_ratio"]
+            assert np.array_equal(info["ball_angles"][i], inf["ball_angles"])
+            assert info["balanced"][i] == inf["balanced"]
+            done[i] = te or tr
+            ends += te or tr
+    return resets, ends
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS[:2])
+def test_vector_matches_single_envs_with_autoreset(env_id):
+    rng = np.random.default_rng(0)
+    n, steps = 3, 75
+    actions = rng.uniform(-0.2, 1.0, size=(steps, n, 1)).astype(np.float32)
+    resets, ends = compare_with_singles(env_id, n, steps, 123, actions, **SHORT)
+    assert ends >= n and resets >= n  # every sub-environment finished and restarted
+
+
+def test_dwell_vector_matches_single_envs():
+    rng = np.random.default_rng(1)
+    n = 3
+    actions = rng.uniform(-1, 1, size=(4, n, 3)).astype(np.float32)
+    resets, ends = compare_with_singles("abb_gym/DwellProfile-v0", n, 4, 7, actions,
+                                        scene="lu_hung_odd3")
+    assert ends == 2 * n and resets == 2 * n  # episode, autoreset, episode, autoreset
+
+
+def test_make_vec_returns_native_vector_env():
+    for env_id in ENV_IDS:
+        vec = make_vec(env_id, 4)
+        assert isinstance(vec.unwrapped, BalancerVectorEnv)
+        assert vec.num_envs == 4
+        assert vec.observation_space.shape == (4,) + vec.single_observation_space.shape
+        assert vec.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+        obs, info = vec.reset(seed=0)
+        assert obs.shape == vec.observation_space.shape and obs.dtype == np.float32
+        assert vec.observation_space.contains(obs)
+        obs, rew, term, trunc, info = vec.step(vec.action_space.sample())
+        assert vec.observation_space.contains(obs)
+        assert rew.shape == (4,) and term.dtype == np.bool_ and trunc.dtype == np.bool_
+        assert info["_reward_terms"].all()
+        total = sum(info["reward_terms"][k] for k in
+                    ("vibration", "time", "effort", "residual", "failure"))
+        assert np.array_equal(total, rew)
+        vec.close()
+
+
+def test_backstop_matches_time_limit():
+    vec = make_vec("abb_gym/RunUpSpeed-v0", 2, max_episode_steps=5)
+    single = gym.make("abb_gym/RunUpSpeed-v0", max_episode_steps=5)
+    vec.reset(seed=0)
+    single.reset(seed=0)
+    for k in range(5):
+        _, r, te, tr, _ = vec.step(np.full((2, 1), 0.5))
+        _, r1, te1, tr1, _ = single.step(np.array([0.5]))
+        assert r[0] == r1 and tr[0] == tr1 and te[0] == te1
+    assert tr.all() and tr1
+
+
+def test_seed_list_and_options_per_env():
+    vec = make_vec("abb_gym/RunUpSpeed-v0", 3)
+    _, info = vec.reset(seed=[5, 6, 7], options={"imbalance_ratio": [0.3, 0.5, 0.7],
+                                                  "ball_angles": [1.0, -1.0]})
+    cap = vec.unwrapped.scene.balancing_capacity
+    np.testing.assert_allclose(info["imbalance"], np.array([0.3, 0.5, 0.7]) * cap)
+    assert np.array_equal(info["initial_ball_angles"], [[1.0, -1.0]] * 3)
+    _, info = vec.reset(options={"ball_angles": [[0.0, 1.0], [1.0, 2.0], [2.0, 3.0]]})
+    assert np.array_equal(info["initial_ball_angles"][2], [2.0, 3.0])
+    with pytest.raises(ValueError, match="num_envs"):
+        vec.reset(options={"imbalance_ratio": [0.3, 0.5]})
+    # partial reset: only sub-environment 1 restarts
+    vec.step(np.full((3, 1), 1.0))
+    mask = np.array([False, True, False])
+    obs, info = vec.reset(options={"reset_mask": mask})
+    assert obs[1, 0] == 0.0 and obs[0, 0] > 0.0 and obs[2, 0] > 0.0
+    assert info["_imbalance"].tolist() == [False, True, False]
+
+
+def test_vector_bad_actions():
+    vec = make_vec("abb_gym/RunUpSpeed-v0", 2)
+    vec.reset(seed=0)
+    states = vec.unwrapped.states
+    bad = np.array([[0.5], [np.nan]])
+    with pytest.raises(ValueError, match="finite"):
+        vec.step(bad)
+    assert np.array_equal(vec.unwrapped.states, states)
+    with pytest.raises(ValueError, match="shape"):
+        vec.step(np.zeros((3, 1)))
+    with pytest.warns(UserWarning, match="clipped"):
+        vec.step(np.array([[2.0], [0.0]]))
+    with pytest.raises(gym.error.ResetNeeded):
+        make_vec("abb_gym/RunUpSpeed-v0", 2).step(np.zeros((2, 1)))
+    with pytest.raises(ValueError, match="num_envs"):
+        make_vec("abb_gym/RunUpSpeed-v0", 0)
+
+
+def test_vector_render_and_pickle():
+    vec = make_vec("abb_gym/RunUpTorque-v0", 5, render_mode="rgb_array")
+    vec.reset(seed=0)
+    a = np.full((5, 1), 0.4)
+    for _ in range(3):
+        vec.step(a)
+    frames = vec.render()
+    assert isinstance(frames, tuple) and len(frames) == 4
+    assert all(f.dtype == np.uint8 and f.shape[2] == 3 for f in frames)
+    clone = pickle.loads(pickle.dumps(vec))
+    o1, r1, *_ = vec.step(a)
+    o2, r2, *_ = clone.step(a)
+    assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
+    vec.close()
