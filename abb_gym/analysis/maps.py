@@ -13,9 +13,11 @@ Axes are named by
 * or, when the base is a :class:`~abb_gym.physics.scene.Scene`, a scene field
   (e.g. ``ball_drag``, ``support_damping``), applied to the scene before it is converted.
 
-Work is spread over processes with :class:`concurrent.futures.ProcessPoolExecutor`;
-``executor.map`` returns results in submission order, so the result does not depend on the
-number of workers (tested).  A tqdm bar shows progress.
+Work runs on the executor layer (:mod:`abb_gym.execution`): local processes by default, or a
+local Ray instance or a Ray cluster; one task per (point, ball count), results in task order,
+so the map does not depend on the executor or the number of workers (tested).  With a store
+(``--resume-dir``) finished points are kept on disk and a rerun only computes the missing
+ones.  A tqdm bar shows progress.
 
 Classification per point and ball count: ``exists`` (the balanced family is not empty),
 ``union_stable`` (some member stable - Lu & Hung's stable region), ``all_stable`` (every
@@ -27,13 +29,13 @@ from __future__ import annotations
 import csv
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
+from ..execution import Executor
 from ..physics.scene import Scene
 from .groups import GROUP_FIELDS, Groups
 from .rotating_frame import DEFAULT_TOL, family_stability
@@ -168,8 +170,8 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
                   y: tuple[str, Sequence[float]], *, n_balls: Sequence[int] | None = None,
                   omega: float = 2.0, n_members: int = 13, tol: float = DEFAULT_TOL,
                   workers: int | None = None, progress: bool = True,
-                  length_scale: float | None = None, chunksize: int | None = None
-                  ) -> StabilityMap:
+                  length_scale: float | None = None, chunksize: int | None = None,
+                  executor: Executor | None = None) -> StabilityMap:
     """Balanced-state stability over the grid ``x`` x ``y``.
 
     Parameters
@@ -181,8 +183,12 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     omega : speed ratio used when neither axis is ``Omega``
     n_members : family members per point (Lu & Hung discretisation, see
         :func:`~abb_gym.analysis.rotating_frame.balanced_family`)
-    workers : processes (default ``os.cpu_count()``; 1 runs in this process)
+    workers : local processes (default: all cores; 1 runs in this process); shorthand for
+        ``executor=Executor(workers=workers)``
     progress : show a tqdm bar
+    chunksize : points sent to a worker at once (default: automatic)
+    executor : where to run (:class:`abb_gym.execution.Executor`: processes, Ray, resume
+        directory, retries); give either this or ``workers``/``chunksize``
     """
     xname, xv = x[0], _values(x[0], x[1])
     yname, yv = y[0], _values(y[0], y[1])
@@ -202,23 +208,14 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
             for n in n_balls:
                 gn = g if n == g.n_balls else g.with_ball_count(n)
                 tasks.append((gn, float(om), n_members, tol))
-    workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1 (got {workers})")
-    from tqdm.auto import tqdm
-    bar = tqdm(total=len(tasks), disable=not progress, desc="stability map", unit="pt")
-    results = []
-    if workers == 1:
-        for t in tasks:
-            results.append(_evaluate(t))
-            bar.update()
+    if executor is None:
+        executor = Executor(workers=workers, chunksize=chunksize, progress=progress)
+    elif workers is not None or chunksize is not None:
+        raise ValueError("give workers and chunksize through the executor when passing one "
+                         f"(got workers={workers!r}, chunksize={chunksize!r})")
     else:
-        cs = chunksize or max(1, len(tasks) // (workers * 16))
-        with ProcessPoolExecutor(max_workers=workers) as ex:
-            for r in ex.map(_evaluate, tasks, chunksize=cs):
-                results.append(r)
-                bar.update()
-    bar.close()
+        executor = executor.replace(progress=executor.progress and progress)
+    results = executor.map(_evaluate, tasks, desc="stability map")
     shape = (len(yv), len(xv))
     data = {n: {f: np.zeros(shape, dtype=bool if f in ("exists", "union_stable", "all_stable")
                             else float) for f in MAP_FIELDS} for n in n_balls}

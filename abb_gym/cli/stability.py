@@ -9,12 +9,19 @@ Without ``--scene`` the base is the dimensionless groups (defaults of
 :class:`abb_gym.analysis.Groups`, changed with ``--set name=value``).  Axis names: ``Omega``,
 any group (eta, eta_total, mu, delta, zeta, zeta_b, spin, race_eccentricity, ...) or, with a
 scene, any scene field.  Writes ``<out>.csv`` and ``<out>.png``.
+
+Execution options are those of every sweep command (:mod:`abb_gym.execution.cli`): local
+processes (``--workers N``, default all cores), a local Ray instance (``--ray``) or an existing
+Ray cluster (``--ray-address ADDRESS``); ``--resume-dir DIR`` keeps finished points so that an
+interrupted map resumes.
 """
 from __future__ import annotations
 
 import argparse
 
 import numpy as np
+
+from ..execution.cli import add_executor_arguments, executor_from_args
 
 __all__ = ["register", "run"]
 
@@ -51,10 +58,9 @@ def register(subparsers) -> None:
                    help="ball counts at equal total ball mass (default: the base's, 3 and 2)")
     p.add_argument("--members", type=int, default=13,
                    help="balanced-family members per point (default 13)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="processes (default: all cores)")
     p.add_argument("--out", default="out/stability/map", help="output path without suffix")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_executor_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -66,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     for label, n in (("--nx", args.nx), ("--ny", args.ny)):
         if n < 1:
             raise ValueError(f"{label} must be >= 1 (got {n})")
+    executor = executor_from_args(args, progress=not args.no_progress)
     settings = dict(args.set)
     group_keys = set(GROUP_FIELDS) | {"eta_total"}
     if args.scene is not None:
@@ -89,8 +96,8 @@ def run(args: argparse.Namespace) -> int:
         base = Groups().replace(**settings) if settings else Groups()
     m = stability_map(base, (args.x, np.linspace(*args.x_range, args.nx)),
                       (args.y, np.linspace(*args.y_range, args.ny)), n_balls=args.balls,
-                      omega=args.omega, n_members=args.members, workers=args.workers,
-                      progress=not args.no_progress, length_scale=args.length_scale)
+                      omega=args.omega, n_members=args.members, executor=executor,
+                      length_scale=args.length_scale)
     csv_path = m.to_csv(f"{args.out}.csv")
     png_path = m.plot(f"{args.out}.png")
     for n in m.n_balls:

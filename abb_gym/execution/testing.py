@@ -1,0 +1,108 @@
+"""A toy task with fault injection, for testing executors and checking a cluster.
+
+:func:`toy_task` is seeded, cheap and deterministic; through marker files in
+``ToyTask.marker_dir`` it can kill its own worker process or raise once, and it leaves one
+``computed-<key>-*`` file per computation, so a test can count how often each task ran.
+
+Check a cluster from any node (Ray workers must be able to import ``abb_gym``)::
+
+    from abb_gym.execution import run_tasks
+    from abb_gym.execution.testing import ToyTask, toy_task
+    tasks = [ToyTask(key=i, x=float(i)) for i in range(200)]
+    assert run_tasks(toy_task, tasks, ray_address="auto", seed=1) == \\
+        run_tasks(toy_task, tasks, workers=1, seed=1, progress=False)
+"""
+from __future__ import annotations
+
+import os
+import signal
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ToyTask", "toy_task", "toy_trainable", "count_computed"]
+
+
+@dataclass(frozen=True)
+class ToyTask:
+    """One toy task.
+
+    key : int - names the task in marker files
+    x : float - offset of the result
+    n : int - normal draws averaged into the result
+    marker_dir : directory for marker files (None: no markers, no fault injection)
+    crash_once : SIGKILL the worker process the first time this task runs
+    raise_once : raise RuntimeError the first time this task runs
+    sleep : seconds to wait before computing (to interrupt a sweep mid-way)
+    """
+
+    key: int
+    x: float = 0.0
+    n: int = 16
+    marker_dir: str | None = None
+    crash_once: bool = False
+    raise_once: bool = False
+    sleep: float = 0.0
+
+
+def _first_time(marker_dir: str, name: str) -> bool:
+    """True the first time (creates the marker atomically, so concurrent runs agree)."""
+    try:
+        fd = os.open(Path(marker_dir) / name, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        return False
+    os.close(fd)
+    return True
+
+
+def toy_task(task: ToyTask, seed: np.random.SeedSequence | None = None) -> float:
+    """``x + mean(n standard normals)`` drawn from ``seed`` (default: ``task.key``)."""
+    if task.sleep > 0:
+        time.sleep(task.sleep)
+    if task.marker_dir is not None:
+        if task.crash_once and _first_time(task.marker_dir, f"crashed-{task.key}"):
+            os.kill(os.getpid(), signal.SIGKILL)  # as if the OOM killer or a node loss hit it
+        if task.raise_once and _first_time(task.marker_dir, f"raised-{task.key}"):
+            raise RuntimeError(f"injected failure of toy task {task.key}")
+    rng = np.random.default_rng(seed if seed is not None else task.key)
+    value = float(task.x + rng.standard_normal(task.n).mean())
+    if task.marker_dir is not None:
+        (Path(task.marker_dir) / f"computed-{task.key}-{os.getpid()}-{uuid.uuid4().hex}").touch()
+    return value
+
+
+def count_computed(marker_dir: str | os.PathLike) -> dict[int, int]:
+    """Computations per task key found in ``marker_dir``."""
+    counts: dict[int, int] = {}
+    for p in Path(marker_dir).glob("computed-*"):
+        key = int(p.name.split("-")[1])
+        counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def toy_trainable(config: dict) -> dict:
+    """A trainable for :func:`abb_gym.execution.tune.run_trials`: three "iterations" of a
+    seeded noisy quadratic in ``config["lr"]``, reported through
+    :func:`~abb_gym.execution.tune.report`; final metrics ``{"score", "lr", "seed"}``.
+
+    ``config["marker_dir"]`` (optional) gets one ``computed-<seed>-*`` file per run, and with
+    ``config["crash_once"]`` the first run of each seed kills its process.
+    """
+    from .tune import report
+
+    marker_dir = config.get("marker_dir")
+    seed = int(config.get("seed", 0))
+    if marker_dir and config.get("crash_once") and _first_time(marker_dir, f"crashed-{seed}"):
+        os.kill(os.getpid(), signal.SIGKILL)
+    rng = np.random.default_rng(seed)
+    lr = float(config["lr"])
+    score = 0.0
+    for it in range(3):
+        score = float(-(np.log10(lr) + 3.0) ** 2 + 0.01 * rng.standard_normal() + 0.1 * it)
+        report({"score": score, "iteration": it})
+    if marker_dir:
+        (Path(marker_dir) / f"computed-{seed}-{os.getpid()}-{uuid.uuid4().hex}").touch()
+    return {"score": score, "lr": lr, "seed": seed}

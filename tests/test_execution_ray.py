@@ -1,0 +1,126 @@
+"""Executor layer on a local Ray instance started by this module with 2 CPUs: the same sweep
+gives identical results locally and on Ray, a killed Ray worker is retried with nothing lost or
+counted twice, an interrupted sweep resumes without recomputing finished tasks, run_trials gives
+the same trials on Ray Tune as locally, and ``abb-gym stability-map --ray`` matches
+``--workers 1``.  Skipped only when Ray is not installed (``pip install 'abb-gym[cluster]'``)."""
+import numpy as np
+import pytest
+
+ray = pytest.importorskip(
+    "ray", reason="Ray is not installed: pip install 'abb-gym[cluster]' to run the Ray tests")
+
+from abb_gym.analysis import Groups, stability_map  # noqa: E402
+from abb_gym.execution import (Executor, ResultStore, TaskFailed, run_tasks,  # noqa: E402
+                               task_id, task_seed)
+from abb_gym.execution.testing import ToyTask, count_computed, toy_task, toy_trainable  # noqa
+from abb_gym.execution.tune import grid, loguniform, run_trials  # noqa: E402
+
+N = 24
+
+
+@pytest.fixture(scope="module", autouse=True)
+def ray_instance():
+    if ray.is_initialized():
+        ray.shutdown()
+    # a small object store: these tests move kilobytes, and the machine is shared
+    # address="local": a new instance even if RAY_ADDRESS or a `ray start` cluster exists
+    ray.init(address="local", num_cpus=2, include_dashboard=False,
+             object_store_memory=100 * 2**20)
+    yield
+    ray.shutdown()
+
+
+def _tasks(tmp_path=None, **flags):
+    return [ToyTask(key=i, x=float(i), marker_dir=None if tmp_path is None else str(tmp_path),
+                    **{k: i in v for k, v in flags.items()}) for i in range(N)]
+
+
+def test_same_sweep_identical_locally_and_on_ray():
+    tasks = _tasks()
+    local = run_tasks(toy_task, tasks, workers=2, seed=7, progress=False)
+    assert run_tasks(toy_task, tasks, workers=1, seed=7, progress=False) == local
+    assert run_tasks(toy_task, tasks, ray=True, seed=7, progress=False) == local
+    assert run_tasks(toy_task, tasks, ray=True, seed=7, chunksize=5, workers=1,
+                     progress=False) == local
+
+
+def test_stability_map_identical_locally_and_on_ray():
+    g = Groups(eta=0.4, delta=10)
+    kw = dict(n_balls=(3, 2), n_members=5, progress=False)
+    axes = (("zeta", [0.05, 0.1, 0.2]), ("Omega", [1.2, 1.5, 1.8, 2.1]))
+    a = stability_map(g, *axes, workers=2, **kw)
+    b = stability_map(g, *axes, executor=Executor(ray=True), **kw)
+    for n in (3, 2):
+        for f in ("exists", "union_stable", "all_stable", "fraction_stable", "best", "worst"):
+            assert np.array_equal(a.field(n, f), b.field(n, f), equal_nan=True)
+
+
+def test_killed_ray_worker_is_retried_nothing_lost_or_double(tmp_path):
+    crash, boom = {2, 13}, {6}
+    tasks = _tasks(tmp_path, crash_once=crash, raise_once=boom)
+    out = run_tasks(toy_task, tasks, ray=True, chunksize=1, seed=7, store=tmp_path / "s",
+                    progress=False)
+    assert out == run_tasks(toy_task, _tasks(), workers=1, seed=7, progress=False)
+    assert count_computed(tmp_path) == {i: 1 for i in range(N)}
+    assert {int(p.name.split("-")[1]) for p in tmp_path.glob("crashed-*")} == crash
+    assert len(ResultStore(tmp_path / "s")) == N
+
+
+def test_interrupted_ray_sweep_resumes_without_recomputing(tmp_path):
+    """Task 15 fails with no retries left, which stops the sweep; the rerun (task 15 now
+    passes) computes exactly the tasks whose results were not stored.  The store is shared
+    across executors, so the rerun may even be local."""
+    tasks = _tasks(tmp_path, raise_once={15})
+    store = ResultStore(tmp_path / "s")
+    with pytest.raises(TaskFailed, match="injected failure"):
+        run_tasks(toy_task, tasks, ray=True, workers=2, chunksize=1, seed=7, retries=0,
+                  store=store.directory, progress=False)
+    finished = set(store.ids())
+    assert 0 < len(finished) < N
+    before = {p.name for p in tmp_path.glob("computed-*")}
+    out = run_tasks(toy_task, tasks, ray=True, chunksize=1, seed=7, retries=0,
+                    store=store.directory, progress=False)
+    assert out == run_tasks(toy_task, _tasks(), workers=1, seed=7, progress=False)
+    rerun = sorted(int(p.split("-")[1])
+                   for p in {p.name for p in tmp_path.glob("computed-*")} - before)
+    ids = [task_id(toy_task, t, task_seed(7, i)) for i, t in enumerate(tasks)]
+    assert rerun == [i for i in range(N) if ids[i] not in finished]
+
+
+def test_run_trials_on_ray_tune_matches_local_and_resumes(tmp_path):
+    space = {"lr": loguniform(1e-5, 1e-1), "seed": grid([0, 1]), "marker_dir": str(tmp_path)}
+    local = run_trials(toy_trainable, space, seed=4, executor=Executor(workers=1,
+                                                                       progress=False))
+    ex = Executor(ray=True, store=tmp_path / "store", progress=False)
+    tuned = run_trials(toy_trainable, space, seed=4, executor=ex, metric="score",
+                       storage_path=tmp_path / "tune")
+    assert [t.metrics for t in tuned] == [t.metrics for t in local]
+    assert [t.config for t in tuned] == [t.config for t in local]
+    assert sum(count_computed(tmp_path).values()) == 4
+    again = run_trials(toy_trainable, space, seed=4, executor=ex, metric="score")
+    assert [t.metrics for t in again] == [t.metrics for t in local]
+    assert sum(count_computed(tmp_path).values()) == 4           # resumed: nothing rerun
+
+
+def test_cli_stability_map_on_ray_matches_local(tmp_path):
+    from abb_gym.cli import main
+    argv = ["stability-map", "--x", "zeta", "--x-range", "0.05", "0.2", "--nx", "3",
+            "--y", "Omega", "--y-range", "1.2", "2.0", "--ny", "2", "--members", "5",
+            "--no-progress"]
+    assert main(argv + ["--workers", "1", "--out", str(tmp_path / "local")]) == 0
+    assert main(argv + ["--ray", "--out", str(tmp_path / "ray")]) == 0
+    assert (tmp_path / "local.csv").read_text() == (tmp_path / "ray.csv").read_text()
+
+
+@pytest.mark.slow
+def test_ray_tune_retries_a_crashed_trial(tmp_path):
+    """Each trial's first run kills its Ray actor; Tune's FailureConfig restarts it and the
+    results still match the local run (slow: every restart costs a new actor)."""
+    space = {"lr": loguniform(1e-5, 1e-1), "seed": grid([0, 1]), "marker_dir": str(tmp_path)}
+    local = run_trials(toy_trainable, space, seed=4, executor=Executor(workers=1,
+                                                                       progress=False))
+    tuned = run_trials(toy_trainable, dict(space, crash_once=True), seed=4,
+                       executor=Executor(ray=True, progress=False),
+                       storage_path=tmp_path / "tune")
+    assert [t.metrics for t in tuned] == [t.metrics for t in local]
+    assert len(list(tmp_path.glob("crashed-*"))) == 2
