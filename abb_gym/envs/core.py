@@ -353,10 +353,6 @@ def observe_rows(rows, s, p, b, st, cfg, obs, out, trace):
         _observe(i, s, p, b, st, cfg, obs, out, trace)
 
 
-batch.flush_stale_caches("envs_core", _balance, _clip, _observe, _interval, _env_step,
-                         step_serial, step_parallel, observe_rows)
-
-
 # =============================================================================== Python side
 def jeffcott_amplitude(imbalance: float, mass: float, stiffness: float, damping: float,
                        speed: float) -> float:

@@ -32,17 +32,12 @@ work        (N, n, WORK_COLUMNS)   scratch of :func:`model.accelerations`
 
 Workspaces are passed in (never allocated per step) so that the batch loop does no allocation.
 
-Compiled-cache hygiene: numba's on-disk cache of a function is invalidated only when the file
-that defines it changes, not when a function it calls (``model.state_derivative`` in another
-file) does.  :func:`flush_stale_caches` therefore keeps a fingerprint of every module of
-``abb_gym/physics`` next to the cache and flushes the given functions' caches when it changes;
-this module and :mod:`abb_gym.envs.core` call it on import for their kernels.
+Compiled-cache hygiene (numba does not notice edits of called functions in other files) is
+handled once for the whole package by :mod:`abb_gym._jit_cache` on import.
 """
 from __future__ import annotations
 
-import hashlib
 import math
-from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
@@ -50,7 +45,7 @@ from numba import njit, prange
 from . import integrators as integ
 from . import model as mdl
 
-__all__ = ["advance", "run_batch", "make_workspace", "flush_stale_caches", "WS_ROWS",
+__all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS",
            "WS_BACKUP"]
 
 WS_ROWS = 7
@@ -151,34 +146,4 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
         status[e, 3] = total
 
 
-def physics_fingerprint() -> str:
-    """SHA-1 over the sources of every module in ``abb_gym/physics``."""
-    h = hashlib.sha1()
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
 
-
-def flush_stale_caches(tag: str, *dispatchers) -> bool:
-    """Flush the numba caches of ``dispatchers`` if the physics sources changed since they
-    were written (see the module docstring).  Returns True if it flushed.  Never raises: cache
-    housekeeping must not break an import (a read-only install simply keeps its cache)."""
-    try:
-        caches = [d._cache for d in dispatchers if hasattr(d._cache, "cache_path")]
-        if not caches:
-            return False
-        stamp = Path(caches[0].cache_path) / f"{tag}.physics-fingerprint"
-        fingerprint = physics_fingerprint()
-        if stamp.exists() and stamp.read_text() == fingerprint:
-            return False
-        for cache in caches:
-            cache.flush()
-        stamp.parent.mkdir(parents=True, exist_ok=True)
-        stamp.write_text(fingerprint)
-        return True
-    except Exception:  # pragma: no cover - unwritable cache folder and the like
-        return False
-
-
-flush_stale_caches("batch", advance, run_batch)
