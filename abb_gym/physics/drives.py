@@ -16,11 +16,14 @@
 can be captured at the critical speed: near resonance the whirl of the imbalance dissipates
 power through the support damping (and the lagging balls through their drag), which shows up
 as a load torque on the rotor; where that load exceeds what the motor has left, the run-up
-stalls just below the critical speed although the motor's no-load speed lies far above it.
+stalls at the critical speed (the speed hunts around it) although the motor's no-load speed
+lies far above it.
 A stronger drive, or a faster passage, jumps through.  :meth:`MotorDrive.linear_characteristic`
-builds the classic open-loop characteristic ``T = T_stall (1 - w / w_no_load)``.  This matters
-whenever the drive's power reserve at the critical speed is comparable to the resonance loss
-(small motors, heavy imbalance, light support damping); a prescribed speed profile hides it.
+builds the classic open-loop characteristic ``T = T_stall (1 - w / w_no_load)``;
+``no_load_speed`` and ``power_limit`` put the same kind of envelope on a speed-controlled
+drive.  This matters whenever the drive's power reserve at the critical speed is comparable to
+the resonance loss (small motors, heavy imbalance, light support damping); a prescribed speed
+profile hides it.
 
 Both produce a segment table for the compiled kernels (one row per segment, see
 :mod:`abb_gym.physics.model`), with segment starts at every breakpoint so that fixed-step
@@ -244,12 +247,16 @@ class MotorDrive:
     def linear_characteristic(cls, stall_torque: float, no_load_speed: float,
                               power_limit: float | None = None, initial_speed: float = 0.0
                               ) -> "MotorDrive":
-        """Open-loop motor ``T = stall_torque (1 - w / no_load_speed)`` [N m] for
-        0 <= w <= no_load_speed (0 above), optionally also capped at ``power_limit`` [W]."""
+        """Open-loop motor ``T = stall_torque (1 - w / no_load_speed)`` [N m] (a DC motor on a
+        fixed voltage), clipped to +-stall_torque: it brakes above the no-load speed, as such
+        a motor does; optionally also capped at ``power_limit`` [W].
+
+        Written as the speed law ``g (w_target - w)`` with ``g = stall / no_load`` and
+        ``w_target = no_load_speed``, so that the step rule of :func:`simulate` sees the speed
+        the rotor can reach."""
         stall = _finite("stall_torque", stall_torque, positive=True, unit="N m")
-        return cls(torque=stall, torque_limit=stall,
-                   no_load_speed=_finite("no_load_speed", no_load_speed, positive=True,
-                                         unit="rad/s"),
+        w0 = _finite("no_load_speed", no_load_speed, positive=True, unit="rad/s")
+        return cls(speed_gain=stall / w0, target=w0, torque_limit=stall,
                    power_limit=power_limit, initial_speed=initial_speed)
 
     def limit(self, scene: Scene) -> float:
