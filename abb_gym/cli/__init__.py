@@ -15,6 +15,8 @@ SUBCOMMANDS = [
     "abb_gym.cli.demo",
     "abb_gym.cli.stability",
     "abb_gym.cli.bench",
+    "abb_gym.cli.evaluate",
+    "abb_gym.cli.tune",
 ]
 
 

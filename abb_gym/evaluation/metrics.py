@@ -50,18 +50,34 @@ def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
                   operating_speed: float | None = None, torque=None,
                   settle_window: float = 0.5, angle_tol: float = math.radians(2.0),
                   balance_tol: float = 0.1) -> dict[str, Any]:
-    """The metrics of the module docstring for one run."""
+    """The metrics of the module docstring for one run of ``scene``."""
+    angles = np.asarray(ball_angles, float).reshape(len(t), -1)
+    imbalance = residual_imbalance(scene, angles[-1])
+    return metrics_from_arrays(
+        t, rotor_speed, np.asarray(whirl_radius, float) / scene.reference_length, angles,
+        operating_speed=scene.drive_operating_speed if operating_speed is None
+        else operating_speed, critical_speed=scene.critical_speed,
+        residual_imbalance=imbalance,
+        balanced=imbalance <= best_residual_imbalance(scene) + balance_tol,
+        torque=torque, settle_window=settle_window, angle_tol=angle_tol)
+
+
+def metrics_from_arrays(t, rotor_speed, whirl_ratio, ball_angles, *, operating_speed: float,
+                        critical_speed: float, residual_imbalance: float, balanced: bool,
+                        torque=None, settle_window: float = 0.5,
+                        angle_tol: float = math.radians(2.0)) -> dict[str, Any]:
+    """The metrics from sampled histories: time [s], rotor speed [rad/s], W_r / e, ball
+    angles [rad] (T, n), and the end-of-run residual imbalance / U0 and balanced flag (which
+    the caller computes from the episode's machine)."""
     t = np.asarray(t, float)
     w = np.asarray(rotor_speed, float)
-    ratio = np.asarray(whirl_radius, float) / scene.reference_length
+    ratio = np.asarray(whirl_ratio, float)
     angles = np.asarray(ball_angles, float).reshape(len(t), -1)
-    op = scene.drive_operating_speed if operating_speed is None else operating_speed
-    reached = np.nonzero(w >= SPEED_FRACTION * op)[0]
+    reached = np.nonzero(w >= SPEED_FRACTION * operating_speed)[0]
     k_reach = int(reached[0]) if reached.size else None
     t_reach = float(t[k_reach]) if k_reach is not None else math.nan
     runup = ratio[: k_reach + 1] if k_reach is not None else ratio
     tail = t >= t[-1] - settle_window
-    residual = float(np.mean(ratio[tail]))
     settle = math.nan
     if k_reach is not None:
         dev = np.max(np.abs(angles - angles[-1]), axis=1) > angle_tol
@@ -69,18 +85,17 @@ def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
         settle = 0.0 if late.size == 0 else float(t[k_reach + late[-1]] - t[k_reach])
         if late.size and k_reach + late[-1] == len(t) - 1:
             settle = math.nan  # still moving at the end
-    imbalance = residual_imbalance(scene, angles[-1])
     energy = math.nan
     if torque is not None:
         energy = float(np.trapezoid(np.abs(np.asarray(torque, float) * w), t))
     return {
         "time_to_speed": t_reach,
         "peak_whirl": float(runup.max()),
-        "residual_vibration": residual,
+        "residual_vibration": float(np.mean(ratio[tail])),
         "ball_settling_time": settle,
-        "residual_imbalance": imbalance,
-        "balanced": bool(imbalance <= best_residual_imbalance(scene) + balance_tol),
-        "nonsynchronous_whirl": nonsynchronous_whirl(scene, t, w, angles),
+        "residual_imbalance": float(residual_imbalance),
+        "balanced": bool(balanced),
+        "nonsynchronous_whirl": _slips(t, w, angles, critical_speed, None),
         "drive_energy": energy,
     }
 
@@ -105,8 +120,12 @@ def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles,
     revolution (2 pi) behind the rotor: it orbits slower than the rotor instead of settling
     (Yoshida ch. 5, Spannan's Sommerfeld region).  With ``window`` [s] the slip must happen
     within that time (a faster circulation)."""
+    return _slips(t, rotor_speed, ball_angles, scene.critical_speed, window)
+
+
+def _slips(t, rotor_speed, ball_angles, critical_speed: float, window: float | None) -> bool:
     t = np.asarray(t, float)
-    above = np.nonzero(np.asarray(rotor_speed) >= scene.critical_speed)[0]
+    above = np.nonzero(np.asarray(rotor_speed) >= critical_speed)[0]
     if not above.size:
         return False
     start = int(above[0])

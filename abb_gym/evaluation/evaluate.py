@@ -1,0 +1,231 @@
+"""Policy-versus-baseline evaluation on a fixed, seeded test set.
+
+Episode ``k`` of a test set with seed ``S`` is the environment reset with seed ``S + k`` on the
+evaluation preset (``test``: wider ranges than training, imbalance up to 1.3 x the balancing
+capacity; see ``configs/envs/``).  So every policy meets the same machines in the same
+order, whatever the number of sub-environments, workers or executor.
+
+Episodes run in chunks (one executor task per chunk; a chunk is one native vector
+environment with a sub-environment per episode, stepped until every episode has ended once).
+Per episode the metrics of :mod:`abb_gym.evaluation.metrics` are computed from the recorded
+histories, plus the return.  Drive energy: exact ``int |T w| dt`` on RunUpTorque (T = action
+x torque limit); on RunUpSpeed an estimate with the rigid spinning inertia,
+``int |(J_spin a + b_0 w) w| dt``; not defined for DwellProfile (NaN).
+
+:func:`summarise` gives means with 95 % confidence intervals (Student t for means, Wilson
+score for shares).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import gymnasium as gym
+import numpy as np
+from scipy import stats
+
+from .baseline_policies import spinning_inertia
+from .metrics import metrics_from_arrays
+from .policies import Policy, resolve
+
+METRICS = ("time_to_speed", "peak_whirl", "residual_vibration", "ball_settling_time",
+           "balanced", "nonsynchronous_whirl", "drive_energy", "return")
+SHARES = ("balanced", "nonsynchronous_whirl")
+UNITS = {"time_to_speed": "s", "peak_whirl": "W_r/e", "residual_vibration": "W_r/e",
+         "ball_settling_time": "s", "balanced": "share", "nonsynchronous_whirl": "share",
+         "drive_energy": "J", "return": "-"}
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One executor task: episodes ``indices`` of the test set under one policy."""
+    env_id: str
+    scene: str
+    preset: str
+    policy: str
+    seed: int
+    indices: tuple[int, ...]
+    record: tuple[int, ...] = ()
+    env_kwargs: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass
+class Rollout:
+    """Histories of one episode, with the attribute names of a Trajectory for the plots."""
+    scene: Any
+    t: np.ndarray
+    rotor_speed: np.ndarray
+    whirl_ratio: np.ndarray
+    ball_angles: np.ndarray
+    actions: np.ndarray
+
+    @property
+    def n_balls(self) -> int:
+        return self.ball_angles.shape[1]
+
+
+@dataclass
+class EvaluationResult:
+    policy: str
+    env_id: str
+    scene: str
+    preset: str
+    seed: int
+    episodes: list[dict] = field(default_factory=list)
+    rollouts: dict[int, Rollout] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        return summarise(self.episodes)
+
+
+def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        scene=scene, preset=preset, **env_kwargs)
+
+
+def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]]:
+    """Run the chunk's episodes; returns (per-episode metrics, recorded rollouts).
+
+    ``policy``: None (resolve ``chunk.policy``), a Policy, or a callable ``f(env) -> Policy``
+    (for policies that depend on the environment, e.g. one profile per sub-environment).
+    Episode indices may repeat (the same machine under different candidates of a sweep)."""
+    n = len(chunk.indices)
+    env = make_env(chunk.env_id, chunk.scene, chunk.preset, n, **dict(chunk.env_kwargs))
+    if policy is None:
+        policy = resolve(chunk.policy, chunk.env_id, chunk.scene)
+    elif not hasattr(policy, "act"):
+        policy = policy(env)
+    setup = env.unwrapped.setup
+    obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices])
+    policy.reset(env, np.ones(n, bool))
+    hist: dict[str, list] = {k: [] for k in ("t", "w", "ratio", "angles", "act")}
+    first = {"t": np.zeros(n), "w": np.zeros(n), "ratio": np.asarray(info["whirl_ratio"], float),
+             "angles": np.asarray(info["ball_angles"], float)}
+    ret = np.zeros(n)
+    done = np.zeros(n, bool)
+    steps = np.zeros(n, int)
+    final: dict[str, np.ndarray] = {}
+    while not done.all():
+        act = np.asarray(policy.act(obs, info), dtype=np.float32)
+        obs, reward, term, trunc, info = env.step(act)
+        live = ~done
+        ret[live] += reward[live]
+        steps[live] += 1
+        hist["t"].append(np.asarray(info["time"], float))
+        hist["w"].append(np.asarray(info["rotor_speed"], float))
+        hist["ratio"].append(np.asarray(info["whirl_ratio"], float))
+        hist["angles"].append(np.asarray(info["ball_angles"], float))
+        hist["act"].append(act.reshape(n, -1).astype(float))
+        ended = live & (term | trunc)
+        for key in ("residual_imbalance_ratio", "balanced"):
+            final.setdefault(key, np.zeros(n))
+            final[key][ended] = np.asarray(info[key], float)[ended]
+        done |= ended
+    env.close()
+    arrays = {k: np.stack(v) for k, v in hist.items()}  # (T, n, ...)
+    episodes, rollouts = [], {}
+    for j, k in enumerate(chunk.indices):
+        m = steps[j]
+        t = np.concatenate([[0.0], arrays["t"][:m, j]])
+        w = np.concatenate([[0.0], arrays["w"][:m, j]])
+        ratio = np.concatenate([[first["ratio"][j]], arrays["ratio"][:m, j]])
+        angles = np.concatenate([first["angles"][j][None], arrays["angles"][:m, j]])
+        act = arrays["act"][:m, j]
+        torque = _drive_torque(setup, t, w, act)
+        row = metrics_from_arrays(
+            t, w, ratio, angles, operating_speed=setup.operating_speed,
+            critical_speed=setup.scene.critical_speed,
+            residual_imbalance=float(final["residual_imbalance_ratio"][j]),
+            balanced=bool(final["balanced"][j]), torque=torque,
+            settle_window=setup.config.settle_time)
+        row.update(episode=k, seed=chunk.seed + k, policy=getattr(policy, "name", chunk.policy),
+                   steps=int(m), **{"return": float(ret[j])})
+        episodes.append(row)
+        if k in chunk.record and k not in rollouts:
+            rollouts[k] = Rollout(setup.scene, t, w, ratio, angles, act)
+    return episodes, rollouts
+
+
+def _drive_torque(setup, t, w, act):
+    if setup.kind == "torque":
+        return np.concatenate([[0.0], act[:, 0] * setup.torque_limit])
+    if setup.kind == "speed":
+        accel = np.gradient(w, t) if len(t) > 1 else np.zeros_like(w)
+        return spinning_inertia(setup.scene) * accel + setup.scene.bearing_drag * w
+    return None
+
+
+def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, preset: str = "test",
+           chunk_size: int = 32, record: Sequence[int] = (0,), **env_kwargs) -> list[Chunk]:
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1 (got {episodes})")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1 (got {chunk_size})")
+    kw = tuple(sorted(env_kwargs.items()))
+    return [Chunk(env_id, scene, preset, policy, int(seed),
+                  tuple(range(a, min(a + chunk_size, episodes))),
+                  tuple(r for r in record if a <= r < a + chunk_size), kw)
+            for a in range(0, episodes, chunk_size)]
+
+
+def _run_chunk_task(chunk: Chunk):
+    return run_chunk(chunk)
+
+
+def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: int = 0,
+             preset: str = "test", chunk_size: int = 32, record: Sequence[int] = (0,),
+             executor=None, **env_kwargs) -> EvaluationResult:
+    """Evaluate ``policy`` (``baseline:NAME`` or ``ppo:PATH``) on the seeded test set.
+
+    ``executor`` (:class:`abb_gym.execution.Executor`) runs the chunks in parallel; None runs
+    them in this process (the vector environment already uses both cores)."""
+    tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
+                   **env_kwargs)
+    if executor is None:
+        parts = [_run_chunk_task(c) for c in tasks]
+    else:
+        parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
+    result = EvaluationResult(policy, env_id, scene, preset, seed)
+    for eps, rolls in parts:
+        result.episodes.extend(eps)
+        result.rollouts.update(rolls)
+    if result.episodes:
+        result.policy = result.episodes[0]["policy"]
+    return result
+
+
+def _mean_ci(values: np.ndarray) -> tuple[float, float, float, int]:
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return math.nan, math.nan, math.nan, 0
+    mean = float(v.mean())
+    if v.size < 2:
+        return mean, math.nan, math.nan, int(v.size)
+    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    return mean, mean - half, mean + half, int(v.size)
+
+
+def _wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float, float]:
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return p, centre - half, centre + half
+
+
+def summarise(episodes: list[dict]) -> dict[str, Any]:
+    """Mean and 95 % confidence interval of every metric (shares: Wilson interval).
+    ``n`` counts the finite values (time to speed is NaN for runs that never got there)."""
+    out: dict[str, Any] = {"episodes": len(episodes)}
+    for key in METRICS:
+        vals = np.array([float(e[key]) for e in episodes])
+        if key in SHARES:
+            p, lo, hi = _wilson(int(np.nansum(vals)), len(vals))
+            out[key] = {"mean": p, "ci_low": lo, "ci_high": hi, "n": len(vals)}
+        else:
+            mean, lo, hi, n = _mean_ci(vals)
+            out[key] = {"mean": mean, "ci_low": lo, "ci_high": hi, "n": n}
+    return out

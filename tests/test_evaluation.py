@@ -1,0 +1,123 @@
+"""Baseline policies in the environments, the seeded evaluation, tuning, and the report."""
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from abb_gym import simulate
+from abb_gym.baselines import profiles, tuner
+from abb_gym.cli import main
+from abb_gym.evaluation.baseline_policies import dwell_action, make_baseline
+from abb_gym.evaluation.evaluate import _wilson, evaluate, summarise
+from abb_gym.evaluation.report import pareto_front, write_report
+
+SPEED = "abb_gym/RunUpSpeed-v0"
+
+
+def rollout(env_id, family, n=2, **params):
+    env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point",
+                       scene="yoshida_odd", preset="nominal")
+    obs, info = env.reset(seed=3, options={"ball_angles": np.tile([0.4, -0.7], (n, 1))})
+    setup = env.unwrapped.setup
+    pol = make_baseline(family, setup.scene, setup.operating_speed, params=params or None,
+                        use_tuned=False)
+    pol.reset(env, np.ones(n, bool))
+    hist, done = [], np.zeros(n, bool)
+    while not done.all():
+        obs, r, term, trunc, info = env.step(pol.act(obs, info))
+        done |= term | trunc
+        hist.append((info["time"][0], info["whirl_radius"][0], info["rotor_speed"][0],
+                     np.array(info["ball_angles"][0])))
+    return env.unwrapped.episode_scene(0), pol._profile(0), hist
+
+
+@pytest.mark.parametrize("family", ["speed_dwell", "accel_dwell", "speed_reduction"])
+def test_speed_baseline_reproduces_simulate(family):
+    """The deadbeat speed command executes the profile exactly (breakpoints on control
+    instants), so the environment run equals simulate with that profile to rounding."""
+    scene, prof, hist = rollout(SPEED, family)
+    t = np.array([h[0] for h in hist])
+    tr = simulate(scene, prof, t[-1], output_dt=0.01, ball_angles0=[0.4, -0.7])
+    wr = np.array([h[1] for h in hist])
+    np.testing.assert_allclose(tr.whirl_radius[1:len(t) + 1], wr, rtol=0, atol=1e-9 * wr.max())
+    np.testing.assert_allclose(tr.rotor_speed[1:len(t) + 1], [h[2] for h in hist], atol=1e-9)
+
+
+def test_torque_baseline_tracks_the_profile_within_the_limit():
+    scene, prof, hist = rollout("abb_gym/RunUpTorque-v0", "speed_dwell")
+    t = np.array([h[0] for h in hist])
+    w = np.array([h[2] for h in hist])
+    assert np.max(np.abs(w - prof.speed(t))) < 0.02 * scene.drive_operating_speed
+    assert w[-1] == pytest.approx(scene.drive_operating_speed, rel=0.01)
+
+
+def test_dwell_action_encodes_the_profile():
+    env = gym.make("abb_gym/DwellProfile-v0", scene="yoshida_odd", preset="nominal")
+    env.reset(seed=0)
+    setup = env.unwrapped.setup
+    prof = profiles.build("accel_dwell", setup.scene, dwell_speed=110.0, dwell_time=0.4,
+                          dwell_accel=10.0)
+    a = dwell_action(setup, prof)
+    back, params = setup.dwell_profile(a)
+    assert params["dwell_speed"] == pytest.approx(110.0)
+    assert params["dwell_time"] == pytest.approx(0.4)
+    assert params["dwell_acceleration"] == pytest.approx(10.0)
+
+
+def test_evaluation_is_deterministic_and_independent_of_chunking():
+    a = evaluate(SPEED, "yoshida_odd", "baseline:speed_dwell", episodes=6, seed=11,
+                 chunk_size=6)
+    b = evaluate(SPEED, "yoshida_odd", "baseline:speed_dwell", episodes=6, seed=11,
+                 chunk_size=4)
+    for ea, eb in zip(a.episodes, b.episodes):
+        assert ea["return"] == eb["return"] and ea["residual_vibration"] == eb["residual_vibration"]
+    c = evaluate(SPEED, "yoshida_odd", "baseline:speed_dwell", episodes=6, seed=12)
+    assert [e["return"] for e in c.episodes] != [e["return"] for e in a.episodes]
+
+
+def test_summary_confidence_intervals():
+    p, lo, hi = _wilson(5, 10)
+    assert p == 0.5 and lo == pytest.approx(0.2366, abs=1e-3) and hi == pytest.approx(0.7634, abs=1e-3)
+    eps = [{"time_to_speed": v, "peak_whirl": v, "residual_vibration": v,
+            "ball_settling_time": math.nan, "balanced": v > 1, "nonsynchronous_whirl": False,
+            "drive_energy": v, "return": -v} for v in (1.0, 2.0, 3.0)]
+    s = summarise(eps)
+    assert s["residual_vibration"]["mean"] == 2.0
+    # t(0.975, 2) = 4.303, s = 1, n = 3: half width 2.484
+    assert s["residual_vibration"]["ci_high"] == pytest.approx(2.0 + 4.3027 / math.sqrt(3), rel=1e-4)
+    assert s["ball_settling_time"]["n"] == 0 and math.isnan(s["ball_settling_time"]["mean"])
+    assert s["balanced"]["mean"] == pytest.approx(2 / 3)
+
+
+def test_pareto_front():
+    pts = np.array([[1.0, 5.0], [2.0, 3.0], [2.5, 4.0], [3.0, 1.0], [4.0, 1.0], [np.nan, 0.0]])
+    assert list(pareto_front(pts)) == [0, 1, 3]
+
+
+def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
+    r = tuner.tune("yoshida_odd", families=("speed_dwell",), n_first=6, n_second=3,
+                   episodes=4, write=False)
+    fam = r["families"]["speed_dwell"]
+    assert fam["mean_return"] >= fam["default_mean_return"]
+    rows = tuner.sweep("yoshida_odd", families=("ramp",), n=3, episodes=2)
+    assert len(rows) == 3 and all(np.isfinite(r["time_to_speed"]) for r in rows)
+    res = [evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=3, seed=0)]
+    paths = write_report(res, tmp_path, rows)
+    for key in ("summary", "episodes", "json", "timeseries", "pareto"):
+        assert paths[key].exists()
+    data = json.loads(paths["json"].read_text())
+    assert data["policies"][0]["summary"]["episodes"] == 3
+
+
+def test_evaluate_cli(tmp_path, capsys):
+    rc = main(["evaluate", "--policy", "baseline:speed_dwell", "--policy", "baseline:ramp",
+               "--episodes", "3", "--out", str(tmp_path)])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "baseline:speed_dwell" in out and "residual_vibration" in out
+    assert (tmp_path / "pareto.png").exists() and (tmp_path / "timeseries.png").exists()
+    assert main(["evaluate", "--policy", "baseline:magic", "--episodes", "2",
+                 "--out", str(tmp_path)]) == 2
+    assert main(["evaluate", "--policy", "nonsense", "--out", str(tmp_path)]) == 2
