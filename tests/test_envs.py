@@ -326,8 +326,9 @@ def test_kwargs_override_preset_fields():
 
 
 # ------------------------------------------------------------------------ physics agreement
-def test_speed_env_reproduces_simulate():
-    env = make(preset="nominal").unwrapped
+@pytest.mark.parametrize("integrator", ["rk4", "etdrk4"])
+def test_speed_env_reproduces_simulate(integrator):
+    env = make(preset="nominal", integrator=integrator).unwrapped
     env.reset(seed=0, options={"ball_angles": [0.3, -0.7]})
     sc = env.episode_scene
     alpha = 40.0  # breakpoint at 6 s falls on a control instant
@@ -339,7 +340,7 @@ def test_speed_env_reproduces_simulate():
     states = np.array(states)
     tr = abb_gym.simulate(sc, abb_gym.SpeedProfile.ramp(alpha, sc.drive_operating_speed),
                           6.5, dt=env.integration_step, output_dt=0.01,
-                          ball_angles0=[0.3, -0.7])
+                          ball_angles0=[0.3, -0.7], method=integrator)
     assert tr.states.shape == states.shape
     nq = 3 + sc.ball_count
     np.testing.assert_allclose(states[:, :2], tr.states[:, :2], rtol=0,
@@ -469,3 +470,8 @@ def test_gravity_scene_starts_at_rest_in_its_sag():
     assert np.all(obs[1:4] == 0.0)
     _, _, _, _, info = env.step(np.array([0.0]))  # at rest: only the balls settle a little
     assert info["vibration_radius"] < 1e-3 * abs(sag[1])
+
+
+def test_unknown_integrator_is_rejected_naming_the_field():
+    with pytest.raises(ValueError, match="'integrator' must be one of"):
+        make(integrator="euler")

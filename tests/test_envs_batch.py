@@ -6,6 +6,7 @@ import pytest
 
 import abb_gym
 from abb_gym.physics import batch, model as mdl
+from abb_gym.physics import integrators as integ
 from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics.simulate import default_step, initial_state
 
@@ -64,8 +65,9 @@ def test_advance_reports_nonfinite_and_whirl():
     ws, work = batch.make_workspace(1, 2)
     whirl = np.zeros(4)  # integral, max, rest position (0, 0)
     st, j, t_fail, bad, steps = batch.advance(s, 0.0, 2.6, rows, len(rows), 0, p, b, 1e-3,
-                                              ws[0], work[0], whirl)
+                                              ws[0], work[0], whirl, integ.METHOD_RK4)
     assert st == 0 and steps == 2600 and whirl[1] > 0 and 0 < whirl[0] < 2.6 * whirl[1]
     s[4] = np.nan
-    st, *_ = batch.advance(s, 2.6, 2.7, rows, len(rows), j, p, b, 1e-3, ws[0], work[0], whirl)
+    st, *_ = batch.advance(s, 2.6, 2.7, rows, len(rows), j, p, b, 1e-3, ws[0], work[0], whirl,
+                           integ.METHOD_RK4)
     assert st == 1

@@ -28,6 +28,7 @@ from gymnasium import spaces
 from numba import njit, prange
 
 from ..physics import batch
+from ..physics import integrators as integ
 from ..physics import model as mdl
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene, load_scene
@@ -42,8 +43,8 @@ KINDS = {"torque": KIND_TORQUE, "speed": KIND_SPEED, "dwell": KIND_DWELL}
 # ---------------------------------------------------------------- cfg: environment constants
 (C_KIND, C_DT, C_WOP, C_TOL, C_OVERSPEED, C_TLIM, C_AMAX, C_CLEAR, C_VSCALE, C_FILT,
  C_NSETTLE, C_NMAX, C_BACKSTOP, C_TREF, C_WV, C_WT, C_WE, C_WR, C_WF, C_NACT, C_OBS_BALLS,
- C_SPEED_LO, C_SPEED_HI, C_VIB_HI, C_BAL_TOL, C_TEP) = range(26)
-N_CFG = 26
+ C_SPEED_LO, C_SPEED_HI, C_VIB_HI, C_BAL_TOL, C_TEP, C_METHOD) = range(27)
+N_CFG = 27
 # ---------------------------------------------------------------- st: per-environment state
 (S_K, S_FILT, S_NSETTLE, S_REACHED, S_T_REACH, S_RES_SUM, S_PEAK, S_DONE, S_TERM, S_TRUNC,
  S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX, S_NSEG, S_J, S_PEN_RATE, S_PEN_TERM, S_XS, S_YS,
@@ -156,7 +157,7 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     nseg = int(st[i, S_NSEG])
     status, j, t_fail, bad, steps = batch.advance(si, t0, t1, d[i], nseg, int(st[i, S_J]),
                                                   p[i], b[i], st[i, S_DTMAX], wsi, work[i],
-                                                  whirl)
+                                                  whirl, int(cfg[C_METHOD]))
     st[i, S_J] = j
     out[i, O_STEPS] += steps
     st[i, S_K] = kk + 1.0
@@ -599,6 +600,7 @@ class EnvSetup:
         c[C_VIB_HI] = self.vibration_bound
         c[C_BAL_TOL] = cfg.balance_tolerance
         c[C_TEP] = self.episode_length
+        c[C_METHOD] = integ.METHOD_IDS[cfg.integrator]
         self.cfg = c
         self._state_names = state_names(nb)
 
@@ -667,7 +669,7 @@ class EnvSetup:
         ep_scene = sc.replace(**changes) if changes else sc
         h = self.config.integration_step
         if h is None:
-            h = default_step(ep_scene, self.max_speed)
+            h = default_step(ep_scene, self.max_speed, self.config.integrator)
         return Episode(ep_scene, float(imbalance), float(phase), angles, float(drag),
                        float(roll), float(h), static_deflection(ep_scene))
 

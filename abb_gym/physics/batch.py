@@ -48,8 +48,15 @@ from . import model as mdl
 __all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS",
            "WS_BACKUP"]
 
-WS_ROWS = 7
-WS_BACKUP = 6  # row of ``ws`` that callers may use to keep the state at the interval start
+# rows of the per-environment scratch ``ws``: stages k1..k5 (ETDRK4 uses five), the stage
+# state, the accelerations, the frozen drag rates, the six ETDRK4 weights, and a free row
+WS_STAGES = 0
+WS_TMP = 5
+WS_QDD = 6
+WS_LAM = 7
+WS_COEF = 8
+WS_BACKUP = 14  # row of ``ws`` that callers may use to keep the state at the interval start
+WS_ROWS = 15
 
 
 def make_workspace(n_envs: int, n_balls: int) -> tuple[np.ndarray, np.ndarray]:
@@ -59,11 +66,13 @@ def make_workspace(n_envs: int, n_balls: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
-    """Advance one state ``s`` (in place) from ``t0`` to ``t1`` with fixed-step RK4.
+def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
+    """Advance one state ``s`` (in place) from ``t0`` to ``t1`` with a fixed-step method,
+    ``integrators.METHOD_RK4`` or ``integrators.METHOD_ETDRK4`` (the same step functions as
+    :func:`integrators.run`, so the results agree bit for bit).
 
     ``seg_d`` holds ``nseg`` drive rows, ``j`` is the index of the current row (as returned by
-    the previous call), ``ws`` a (>= 6, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
+    the previous call), ``ws`` a (WS_ROWS, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
     ``whirl`` (length 4) accumulates over the substeps (right-endpoint rule): ``whirl[0]`` +=
     the integral of the deflection from the rest position ``(whirl[2], whirl[3])`` (the static
     sag under gravity, else 0), ``whirl[1]`` = max(whirl[1], largest whirl radius
@@ -75,8 +84,11 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
     """
     n = s.shape[0]
     nq = n // 2
-    tmp = ws[4]
-    qdd = ws[5, :nq]
+    stages = ws[WS_STAGES:WS_STAGES + 5]
+    tmp = ws[WS_TMP]
+    qdd = ws[WS_QDD, :nq]
+    lam = ws[WS_LAM]
+    coef = ws[WS_COEF:WS_COEF + 6]
     steps = 0
     t = t0
     while t < t1:
@@ -92,7 +104,10 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
         h = (piece_end - t) / m
         for i in range(m):
             ti = t + i * h
-            integ._rk4_step(ti, h, s, p, b, seg_d[j], ws, tmp, qdd, work)
+            if method == integ.METHOD_ETDRK4:
+                integ._etdrk4_step(ti, h, s, p, b, seg_d[j], stages, tmp, qdd, work, lam, coef)
+            else:
+                integ._rk4_step(ti, h, s, p, b, seg_d[j], stages, tmp, qdd, work)
             steps += 1
             bad = integ._first_nonfinite(s)
             if bad >= 0:
@@ -109,8 +124,9 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl):
 
 
 @njit(cache=True, parallel=True)
-def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
-    """:func:`integrators.rk4_run` for ``N`` environments in parallel.
+def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work,
+              method=integ.METHOD_RK4):
+    """:func:`integrators.run` (RK4 or ETDRK4) for ``N`` environments in parallel.
 
     ``s0`` (N, ns) initial states, ``t_out`` (T,) shared output times, ``seg_d``/``nseg`` the
     drive tables, ``p``/``b`` the parameters, ``out`` (N, T, ns) receives the states.
@@ -135,7 +151,8 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work):
         bad = -1
         for k in range(t_out.shape[0] - 1):
             st, j, t_fail, bad, steps = advance(s, t_out[k], t_out[k + 1], seg_d[e], ns_e, j,
-                                                p[e], b[e], dt_max, ws[e], work[e], whirl)
+                                                p[e], b[e], dt_max, ws[e], work[e], whirl,
+                                                method)
             total += steps
             if st != integ.STATUS_OK:
                 break

@@ -55,23 +55,36 @@ def stiff_rate(scene: Scene, max_speed: float) -> float:
     return float(lam.max())
 
 
+# rotation of the fastest motion per step [rad]; ETDRK4 integrates the stiff ball drag
+# exactly, so only accuracy bounds its step (tests/test_validation.py checks both rules)
+ROTATION_PER_STEP = {"rk4": 0.4, "etdrk4": 1.0, "ros2": 0.4}
+
+
+def contact_frequency(scene: Scene) -> float:
+    """Upper bound [rad/s] of the ball-ball contact frequency, sqrt(4 k_c / m_min)."""
+    return math.sqrt(4.0 * scene.contact_stiffness / min(scene.ball_mass))
+
+
 def default_step(scene: Scene, max_speed: float, method: str = "rk4") -> float:
     """Default step [s] of the fixed-step methods for a run reaching ``max_speed`` [rad/s].
 
     The step turns the fastest rotation (the higher critical speed or ``max_speed``) by at most
-    0.4 rad.  For the explicit RK4 it also keeps h * :func:`stiff_rate` <= 1.5, inside RK4's
-    real-axis stability limit of 2.79; "etdrk4" treats that rate exactly and the L-stable
-    "ros2" is stable at any step, so neither needs the bound.  On the
-    Yoshida run-up RK4 takes 1.3 ms steps and stays within 0.1 % of the DOP853 peak whirl and
-    0.1 deg of the ball angles (``tests/test_validation.py`` checks the stated 1 % and 1 deg).
+    :data:`ROTATION_PER_STEP` (0.4 rad for RK4 and ROS2, 1.0 rad for ETDRK4).  For the explicit
+    RK4 it also keeps h * :func:`stiff_rate` <= 1.5, inside RK4's real-axis stability limit of
+    2.79; "etdrk4" treats that rate exactly and the L-stable "ros2" is stable at any step, but
+    both keep h * (contact frequency) <= 1 when balls can collide.  On the Yoshida run-up RK4
+    takes 1.3 ms steps (0.001 % of the DOP853 peak whirl, 4e-4 deg) and ETDRK4 4.2 ms steps
+    (0.1 %, 0.2 deg); ``tests/test_validation.py`` checks the stated 1 % and 1 deg.
     The output interval also caps the step.
     """
     omega = max(scene.critical_speeds[1], abs(max_speed), 1e-9)
-    h = 0.4 / omega
+    h = ROTATION_PER_STEP.get(method, 0.4) / omega
     if method == "rk4":
         rate = stiff_rate(scene, max_speed)
         if rate > 0:
             h = min(h, 1.5 / rate)
+    elif scene.contact_stiffness > 0:
+        h = min(h, 1.0 / contact_frequency(scene))
     return h
 
 
