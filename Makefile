@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh machine:
 #   make demo   - create .venv, install abb-gym, run the main demonstration (figures in out/demo)
-#   make test   - create .venv, install abb-gym with test extras, run the default test suite
+#   make test   - create .venv, install abb-gym with its training and test extras (SB3, CPU
+#                 torch, Ray), run the default test suite
 # Long runs (training, sweeps) are opt-in: make test-slow, make bench.
 PYTHON ?= python3
 VENV ?= .venv
@@ -16,7 +17,7 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
-	$(PIP_INSTALL) -e ".[test]"
+	$(PIP_INSTALL) -e ".[train,test]"
 	touch $@
 
 demo: setup
@@ -33,3 +34,4 @@ bench: setup
 
 clean:
 	rm -rf $(VENV) out
+	find abb_gym -name '*.nbi' -delete -o -name '*.nbc' -delete
