@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from tqdm import tqdm
 
 from ..evaluation.baseline_policies import BASELINES_DIR, BaselinePolicy
 from ..evaluation.evaluate import Chunk, run_chunk
@@ -103,8 +104,11 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
     tasks = [CandidateTask(scene_name, preset, family, tuple(cand[a:a + per]),
                            tuple(range(episodes)), seed)
              for a in range(0, len(cand), per)]
-    parts = ([_run_candidates(t) for t in tasks] if executor is None
-             else executor.map(_run_candidates, tasks, desc=f"{family} candidates"))
+    if executor is None:  # this process; the vector environment already uses every core
+        parts = [_run_candidates(t) for t in tqdm(tasks, desc=f"{family} candidates",
+                                                  disable=len(tasks) < 2)]
+    else:
+        parts = executor.map(_run_candidates, tasks, desc=f"{family} candidates")
     rows = []
     for a, part in zip(range(0, len(cand), per), parts):
         for c in range(len(tasks[a // per].candidates)):

@@ -24,6 +24,7 @@ from typing import Any, Sequence
 import gymnasium as gym
 import numpy as np
 from scipy import stats
+from tqdm import tqdm
 
 from .baseline_policies import spinning_inertia
 from .metrics import metrics_from_arrays
@@ -182,8 +183,9 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     them in this process (the vector environment already uses both cores)."""
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
-    if executor is None:
-        parts = [_run_chunk_task(c) for c in tasks]
+    if executor is None:  # this process; the vector environment already uses every core
+        parts = [_run_chunk_task(c) for c in tqdm(tasks, desc=f"evaluate {policy}",
+                                                  disable=len(tasks) < 2)]
     else:
         parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
     result = EvaluationResult(policy, env_id, scene, preset, seed)
