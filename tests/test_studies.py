@@ -12,3 +12,14 @@ def test_study_charts(tmp_path):
     assert pos["no profile", 2.0, 2.0] < pos["no profile", 1.0, 2.0]
     assert pos["no profile", 1.0, 0.5] < pos["no profile", 1.0, 2.0]
     assert studies.plot_ball_position_study(rows, tmp_path / "b.png").stat().st_size > 5000
+
+
+def test_study_cli_and_executor_give_the_same_rows(tmp_path, capsys):
+    from abb_gym.cli import main
+    from abb_gym.execution import Executor
+    serial = studies.settling_study(dwell_times=(0.4, 0.5), progress=False)
+    parallel = studies.settling_study(dwell_times=(0.4, 0.5), progress=False,
+                                      executor=Executor(workers=2, progress=False))
+    assert serial == parallel
+    assert main(["study", "settling", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "settling_period.png").exists() and (tmp_path / "settling.md").exists()

@@ -17,6 +17,7 @@ SUBCOMMANDS = [
     "abb_gym.cli.bench",
     "abb_gym.cli.evaluate",
     "abb_gym.cli.tune",
+    "abb_gym.cli.study",
 ]
 
 

@@ -37,18 +37,27 @@ def settling_period(scene, dwell_time: float, dwell_accel: float,
     return float(tr.t[hit[0]] - t_s) if hit.size else math.nan
 
 
+def _settling_task(task) -> dict:
+    scene_name, kind, acc, tc = task
+    return {"dwell": kind, "dwell_accel": acc, "dwell_time_s": tc,
+            "settling_period_s": settling_period(load_scene(scene_name), tc, acc)}
+
+
+def _map(fn, tasks, desc, progress, executor):
+    if executor is None:
+        return [fn(t) for t in tqdm(tasks, desc=desc, disable=not progress)]
+    return executor.map(fn, tasks, desc=desc)
+
+
 def settling_study(scene_name: str = "yoshida_odd",
                    dwell_times=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8),
-                   progress: bool = True) -> list[dict]:
-    scene = load_scene(scene_name)
-    rows = []
-    todo = [(kind, acc, tc) for kind, acc in (("constant speed", 0.0),
-                                              ("constant acceleration", ACCEL_DWELL))
+                   progress: bool = True, executor=None) -> list[dict]:
+    """Rows of (dwell kind, dwell length, settling period); ``executor`` as in
+    :mod:`abb_gym.execution` (None: this process)."""
+    todo = [(scene_name, kind, acc, tc) for kind, acc in (("constant speed", 0.0),
+                                                          ("constant acceleration", ACCEL_DWELL))
             for tc in dwell_times]
-    for kind, acc, tc in tqdm(todo, desc="settling study", disable=not progress):
-        rows.append({"dwell": kind, "dwell_accel": acc, "dwell_time_s": tc,
-                     "settling_period_s": settling_period(scene, tc, acc)})
-    return rows
+    return _map(_settling_task, todo, "settling study", progress, executor)
 
 
 def ball_position_after_critical(scene, with_dwell: bool, after: float = 2.5) -> float:
@@ -60,17 +69,20 @@ def ball_position_after_critical(scene, with_dwell: bool, after: float = 2.5) ->
     return float(np.degrees(tr.ball_angles[-1].min()))
 
 
+def _position_task(task) -> dict:
+    scene_name, with_dwell, m, c = task
+    scene = load_scene(scene_name, ball_mass=m, ball_drag=c)
+    return {"profile": "dwell 0.5 s" if with_dwell else "no profile",
+            "ball_mass_g": m * 1e3, "ball_drag_Ns_m": c,
+            "ball_angle_deg": ball_position_after_critical(scene, with_dwell)}
+
+
 def ball_position_study(scene_name: str = "yoshida_odd", masses=(0.5e-3, 1e-3, 1.5e-3, 2e-3),
                         drags=(0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0),
-                        progress: bool = True) -> list[dict]:
-    rows = []
-    todo = [(dw, m, c) for dw in (False, True) for m in masses for c in drags]
-    for with_dwell, m, c in tqdm(todo, desc="ball position study", disable=not progress):
-        scene = load_scene(scene_name, ball_mass=m, ball_drag=c)
-        rows.append({"profile": "dwell 0.5 s" if with_dwell else "no profile",
-                     "ball_mass_g": m * 1e3, "ball_drag_Ns_m": c,
-                     "ball_angle_deg": ball_position_after_critical(scene, with_dwell)})
-    return rows
+                        progress: bool = True, executor=None) -> list[dict]:
+    """Rows of (profile, ball mass, race drag, ball angle 2.5 s after the critical speed)."""
+    todo = [(scene_name, dw, m, c) for dw in (False, True) for m in masses for c in drags]
+    return _map(_position_task, todo, "ball position study", progress, executor)
 
 
 def plot_settling_study(rows: list[dict], path) -> Path:

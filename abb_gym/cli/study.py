@@ -1,0 +1,39 @@
+"""``abb-gym study``: Yoshida-style parameter studies as charts and tables.
+
+    abb-gym study settling --out out/study        # Fig. 4.23: settling period vs dwell length
+    abb-gym study ball-position --out out/study   # Figs. 5.5/5.11: ball position vs mass, drag
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..execution.cli import add_executor_arguments
+from ..tables import markdown_table
+from .evaluate import _executor
+
+
+def register(sub) -> None:
+    p = sub.add_parser("study", help="Yoshida-style parameter studies (charts + tables)",
+                       description=__doc__)
+    p.add_argument("which", choices=["settling", "ball-position"])
+    p.add_argument("--scene", default="yoshida_odd")
+    p.add_argument("--out", default="out/study")
+    add_executor_arguments(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..evaluation import studies
+    out = Path(args.out)
+    ex = _executor(args)
+    if args.which == "settling":
+        rows = studies.settling_study(args.scene, executor=ex)
+        png = studies.plot_settling_study(rows, out / "settling_period.png")
+    else:
+        rows = studies.ball_position_study(args.scene, executor=ex)
+        png = studies.plot_ball_position_study(rows, out / "ball_position.png")
+    text = markdown_table(rows)
+    (out / f"{args.which}.md").write_text(text + "\n")
+    print(text)
+    print(f"wrote {png}")
+    return 0
