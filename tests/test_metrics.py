@@ -103,3 +103,17 @@ def test_bad_baseline_parameters(scene):
         profiles.build("speed_dwell", scene, dwell_speed=1e4)
     with pytest.raises(ValueError, match="dwell_accel"):
         profiles.build("decel_dwell", scene, dwell_accel=5.0)
+
+
+@pytest.mark.parametrize("name", ["accel_dwell", "decel_dwell"])
+@pytest.mark.parametrize("scene_name", ["yoshida_odd", "spannan_cfrp", "spannan_discoidal"])
+def test_dwell_defaults_scale_with_the_scene(name, scene_name):
+    """Yoshida's 20 of 40 rad/s^2 becomes half the scene's run-up rate, so a slow centrifuge
+    drive never reverses (a fixed -20 rad/s^2 would)."""
+    scene = load_scene(scene_name)
+    prof = profiles.build(name, scene)
+    t = np.linspace(0, profiles.duration(prof), 5000)
+    assert np.all(prof.speed(t) >= -1e-9)
+    assert abs(prof.segments[1][1]) == pytest.approx(0.5 * profiles.default_accel(scene))
+    cut = profiles.build("decel_dwell", scene, dwell_time=1e4)  # cut at standstill
+    assert cut.speed(profiles.duration(cut) - 1e-9) >= 0

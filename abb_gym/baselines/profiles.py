@@ -10,8 +10,10 @@ family                 profile
 ``speed_dwell``        Yoshida sec. 4.2: a constant-speed dwell of ``dwell_time`` at
                        ``dwell_speed``
 ``accel_dwell``        Yoshida sec. 4.3: a dwell of ``dwell_time`` at a lower acceleration
-                       ``dwell_accel`` (> 0) starting at ``dwell_speed``
-``decel_dwell``        Yoshida Fig. 4.18: the same with a deceleration (``dwell_accel`` < 0)
+                       ``dwell_accel`` (> 0, default half the run-up rate) starting at
+                       ``dwell_speed``
+``decel_dwell``        Yoshida Fig. 4.18: the same with a deceleration (``dwell_accel`` < 0,
+                       default minus half the run-up rate), cut at standstill
 ``speed_reduction``    temporary speed reduction (Machines 2020, 8(4), 74): run up to the
                        operating speed, hold ``settle_time``, decelerate at ``accel`` to a
                        plateau ``plateau_speed`` above the critical speed, hold it
@@ -59,20 +61,25 @@ def speed_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: floa
 
 
 def accel_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: float | None = None,
-                dwell_accel: float = 20.0, accel: float | None = None) -> SpeedProfile:
+                dwell_accel: float | None = None, accel: float | None = None) -> SpeedProfile:
     dwell_speed = scene.critical_speed if dwell_speed is None else dwell_speed
     _check_speed("dwell_speed", dwell_speed, scene)
     dwell_time = default_dwell_time(scene) if dwell_time is None else dwell_time
     accel = accel or default_accel(scene)
+    dwell_accel = 0.5 * accel if dwell_accel is None else dwell_accel  # Yoshida: 20 of 40
     end = dwell_speed + dwell_accel * dwell_time
     if end > scene.drive_operating_speed:  # the dwell would overshoot: cut it at the top speed
         dwell_time = (scene.drive_operating_speed - dwell_speed) / dwell_accel
+    elif end < 0:  # a deceleration would reverse the rotor: cut it at standstill
+        dwell_time = dwell_speed / -dwell_accel
     return SpeedProfile.dwell(accel, dwell_speed, dwell_time, dwell_accel,
                               scene.drive_operating_speed)
 
 
 def decel_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: float | None = None,
-                dwell_accel: float = -20.0, accel: float | None = None) -> SpeedProfile:
+                dwell_accel: float | None = None, accel: float | None = None) -> SpeedProfile:
+    if dwell_accel is None:
+        dwell_accel = -0.5 * (accel or default_accel(scene))  # Yoshida Fig. 4.18: -20 of 40
     if dwell_accel >= 0:
         raise ValueError(f"dwell_accel of a deceleration dwell must be < 0 [rad/s^2] "
                          f"(got {dwell_accel:g})")
