@@ -18,6 +18,7 @@ SUBCOMMANDS = [
     "abb_gym.cli.evaluate",
     "abb_gym.cli.tune",
     "abb_gym.cli.study",
+    "abb_gym.cli.train",
 ]
 
 

@@ -1,0 +1,51 @@
+"""Reinforcement learning on the balancer environments: Stable-Baselines3 PPO.
+
+Needs the training extra (``pip install -c constraints.txt 'abb-gym[train]'``).
+
+===================================  ===========================================================
+:class:`NativeVecEnv`                SB3 ``VecEnv`` over the native gymnasium vector
+                                     environment (same-step resets through ``reset_mask``,
+                                     ``terminal_observation``, ``TimeLimit.truncated``)
+:func:`load_config`, TrainConfig     zoo-style YAML configs in ``configs/ppo/``
+:func:`make_sb3_env`                 the adapter over ``gym.make_vec(..., "vector_entry_point")``
+:func:`train`                        one PPO run -> run folder (``abb-gym train``)
+:func:`load_policy`, PPOPolicy       a run folder or shipped agent as an evaluation ``Policy``
+                                     with frozen VecNormalize statistics
+:func:`run_episodes`, summarize      a policy *object* on the seeded test set of
+                                     :mod:`abb_gym.evaluation.evaluate` (same metrics)
+===================================  ===========================================================
+
+Importing this package registers the ``ppo`` policy loader, so ``--policy ppo:PATH`` resolves
+in :func:`abb_gym.evaluation.policies.resolve` (PATH: a run folder or a name in
+``agents/trained``).
+"""
+from __future__ import annotations
+
+import os
+
+# numba's OpenMP workers (the vector environment) and torch's share two cores; with OpenMP's
+# default busy-wait each parallel step leaves threads spinning that slow the next torch call
+# 5-20x.  Passive waiting costs the environment nothing measurable.  Effective only if set
+# before the OpenMP runtimes load (before torch is imported and the first parallel env step).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+try:
+    import stable_baselines3  # noqa: F401
+    import torch  # noqa: F401
+except ImportError as exc:  # pragma: no cover - depends on the installed extras
+    raise ImportError(f"abb_gym.rl needs the training extra: pip install -c constraints.txt "
+                      f"'abb-gym[train]' ({exc})") from exc
+
+from ..evaluation.policies import register_loader
+from .config import (POLICY_FIELDS, TrainConfig, eval_env_kwargs, load_config,
+                     make_native_env, make_sb3_env)
+from .policy import PPOPolicy, _loader, load_policy, trained_dir
+from .rollout import run_episodes, summarize
+from .train import RunResult, train
+from .vec_env import NativeVecEnv, split_info
+
+__all__ = ["NativeVecEnv", "split_info", "TrainConfig", "load_config", "make_sb3_env",
+           "make_native_env", "eval_env_kwargs", "POLICY_FIELDS", "train", "RunResult",
+           "PPOPolicy", "load_policy", "trained_dir", "run_episodes", "summarize"]
+
+register_loader("ppo", _loader)

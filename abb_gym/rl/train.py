@@ -1,0 +1,440 @@
+"""Train Stable-Baselines3 PPO on a balancer environment from a zoo-style config.
+
+``abb-gym train`` and ``agents/train.py`` call :func:`main`; library code calls :func:`train`.
+
+What one run does:
+
+1. builds the native vector environment of the config (``n_envs`` sub-environments, one
+   compiled parallel step) behind the SB3 adapter :class:`~abb_gym.rl.vec_env.NativeVecEnv`,
+   with ``VecMonitor`` (episode statistics) and ``VecNormalize`` (if ``normalize``);
+2. trains ``PPO`` for ``n_timesteps`` environment steps with the seed (Python, NumPy, torch,
+   the environments' generators and the action space), a progress bar, a test-set evaluation
+   every ``eval_freq`` steps and checkpoints every ``checkpoint_freq`` steps;
+3. writes the run folder (default ``runs/<config>/s<seed>-<time>``, git-ignored):
+
+=========================  ==================================================================
+file                       content
+=========================  ==================================================================
+``model.zip``              final model
+``vecnormalize.pkl``       its VecNormalize statistics (load with ``training=False,
+                           norm_reward=False``: :func:`abb_gym.rl.load_policy` does)
+``best_model.zip``,        the model (and statistics) with the best test-set score
+``best_vecnormalize.pkl``  (mean return on the held-out test preset)
+``config.yml``             the config as run (zoo style, keyed by the env id, reusable with
+                           ``--config``) and ``_run``: seed, policy-relevant environment
+                           settings, evaluation environment, wall time, env-steps/s,
+                           versions, final evaluation
+``evaluations.csv``        one row per evaluation: timesteps, wall time, the test-set summary
+``evaluations.npz``        SB3 ``EvalCallback`` layout: timesteps, results (episode returns),
+                           ep_lengths
+``evaluation.json``        final test-set evaluation of the final model (summary + episodes)
+``checkpoints/``           ``ppo_<steps>_steps.zip`` and ``ppo_vecnormalize_<steps>_steps.pkl``
+=========================  ==================================================================
+
+The evaluation is a fixed seeded test set (``eval_seed``, ``eval_episodes``) on the ``test``
+preset (see :mod:`abb_gym.rl.rollout` for the metrics).  Wall time and env-steps/s are printed
+at the end and stored in ``config.yml``.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import yaml
+
+from .config import (TrainConfig, eval_env_kwargs, load_config,
+                     make_sb3_env, policy_env_fields)
+from .policy import PPOPolicy
+from .rollout import KEY_METRICS, brief, run_episodes, summarize
+
+__all__ = ["train", "RunResult", "FrozenNormalizer", "TestSetEvalCallback", "main",
+           "run_from_args", "config_from_args"]
+
+
+
+def evaluate_model(model, env_id: str, env_kwargs: dict[str, Any], meta: dict[str, Any],
+                   episodes: int, seed: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Test-set evaluation of an in-memory model with frozen copies of its statistics."""
+    vn = model.get_vec_normalize_env()
+    norm = FrozenNormalizer.from_vecnormalize(vn) if vn is not None else None
+    policy = PPOPolicy(model, norm, meta, name="ppo")
+    kw = dict(env_kwargs)
+    records = run_episodes(policy, env_id, episodes=episodes, seed=seed,
+                           scene=kw.pop("scene", "yoshida_odd"), preset=kw.pop("preset", "test"),
+                           **kw)
+    return summarize(records), records
+
+
+class FrozenNormalizer:
+    """A copy of VecNormalize's observation statistics that never updates."""
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray, clip_obs: float, epsilon: float,
+                 norm_obs: bool = True):
+        self.mean = np.array(mean, dtype=np.float64)
+        self.var = np.array(var, dtype=np.float64)
+        self.clip_obs = float(clip_obs)
+        self.epsilon = float(epsilon)
+        self.norm_obs = bool(norm_obs)
+        self.training = False
+        self.norm_reward = False
+
+    @classmethod
+    def from_vecnormalize(cls, vn) -> "FrozenNormalizer":
+        return cls(vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon, vn.norm_obs)
+
+    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
+        if not self.norm_obs:
+            return obs
+        out = np.clip((obs - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip_obs,
+                      self.clip_obs)
+        return out.astype(np.float32)
+
+
+def _callbacks_base():
+    from stable_baselines3.common.callbacks import BaseCallback
+    return BaseCallback
+
+
+def _make_eval_callback_class():
+    BaseCallback = _callbacks_base()
+
+    class _TestSetEvalCallback(BaseCallback):
+        """Evaluate on the fixed test set every ``eval_freq`` env steps; keep the best model."""
+
+        def __init__(self, env_id: str, env_kwargs: dict, run_dir: Path, eval_freq: int,
+                     episodes: int, seed: int, meta: dict, verbose: int = 0):
+            super().__init__(verbose)
+            self.env_id = env_id
+            self.env_kwargs = env_kwargs
+            self.run_dir = Path(run_dir)
+            self.eval_freq = int(eval_freq)
+            self.episodes = int(episodes)
+            self.seed = int(seed)
+            self.meta = meta
+            self.best = -math.inf
+            self.last_eval = 0
+            self.rows: list[dict[str, Any]] = []
+            self.npz = {"timesteps": [], "results": [], "ep_lengths": []}
+            self.t0 = time.perf_counter()
+
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            if self.eval_freq <= 0 or self.num_timesteps - self.last_eval < self.eval_freq:
+                return True
+            self.last_eval = self.num_timesteps
+            self._run_eval()
+            return True
+
+        def _run_eval(self) -> None:
+            summary, records = evaluate_model(self.model, self.env_id, self.env_kwargs,
+                                              self.meta, self.episodes, self.seed)
+            means = brief(summary)
+            row = {"timesteps": self.num_timesteps,
+                   "wall_time_s": round(time.perf_counter() - self.t0, 2)}
+            for k in KEY_METRICS:
+                row[k] = means[k]
+                row[k + "_ci_low"] = summary[k]["ci_low"]
+                row[k + "_ci_high"] = summary[k]["ci_high"]
+            self.rows.append(row)
+            for k in KEY_METRICS:
+                self.logger.record(f"eval/{k}", means[k])
+            self.npz["timesteps"].append(self.num_timesteps)
+            self.npz["results"].append([r["return"] for r in records])
+            self.npz["ep_lengths"].append([r["steps"] for r in records])
+            self._write()
+            if means["return"] > self.best:
+                self.best = means["return"]
+                self.model.save(self.run_dir / "best_model.zip")
+                vn = self.model.get_vec_normalize_env()
+                if vn is not None:
+                    vn.save(str(self.run_dir / "best_vecnormalize.pkl"))
+            if self.verbose:
+                print(f"eval @ {self.num_timesteps}: return {means['return']:.3f}, residual "
+                      f"vibration {means['residual_vibration']:.3f} W_r/e, time to speed "
+                      f"{means['time_to_speed']:.2f} s, peak {means['peak_whirl']:.1f}, "
+                      f"balanced {means['balanced']:.2f}", flush=True)
+
+        def _write(self) -> None:
+            with open(self.run_dir / "evaluations.csv", "w", newline="") as fh:
+                w = csv.DictWriter(fh, fieldnames=list(self.rows[0]))
+                w.writeheader()
+                w.writerows(self.rows)
+            np.savez(self.run_dir / "evaluations.npz",
+                     timesteps=np.array(self.npz["timesteps"]),
+                     results=np.array(self.npz["results"]),
+                     ep_lengths=np.array(self.npz["ep_lengths"]))
+
+        def _on_training_end(self) -> None:
+            if self.eval_freq > 0 and self.num_timesteps != self.last_eval:
+                self.last_eval = self.num_timesteps
+                self._run_eval()
+
+    return _TestSetEvalCallback
+
+
+def TestSetEvalCallback(*args, **kwargs):
+    """The test-set evaluation callback (built lazily: SB3 is imported on first use)."""
+    return _make_eval_callback_class()(*args, **kwargs)
+
+
+@dataclass
+class RunResult:
+    """What :func:`train` returns."""
+
+    run_dir: Path
+    wall_time_s: float
+    env_steps: int
+    env_steps_per_s: float
+    evaluation: dict[str, Any]
+
+
+def _versions() -> dict[str, str]:
+    import gymnasium
+    import stable_baselines3
+    import torch
+    import abb_gym
+    return {"abb_gym": getattr(abb_gym, "__version__", "0.1.0"),
+            "stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
+            "gymnasium": gymnasium.__version__, "numpy": np.__version__,
+            "python": platform.python_version()}
+
+
+def default_run_dir(cfg: TrainConfig, seed: int, root: str | os.PathLike = "runs") -> Path:
+    stem = Path(cfg.source).stem if cfg.source else cfg.env_id.split("/")[-1]
+    return Path(root) / stem / f"s{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _yaml_safe(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _yaml_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_yaml_safe(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return None if math.isnan(v) else v
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, str):
+        return str(obj)  # str subclasses (torch's version) are not YAML-safe
+    return obj
+
+
+def _repo_relative(path: str) -> str:
+    """``path`` relative to the repository root when inside it (portable run folders)."""
+    if not path:
+        return path
+    root = Path(__file__).resolve().parents[2]
+    try:
+        return str(Path(path).resolve().relative_to(root))
+    except ValueError:
+        return str(path)
+
+
+def write_config(run_dir: Path, cfg: TrainConfig, meta: dict[str, Any]) -> None:
+    data = {cfg.env_id: _yaml_safe(cfg.to_mapping()), "_run": _yaml_safe(meta)}
+    (run_dir / "config.yml").write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None = None,
+          progress: bool = True, verbose: int = 0, torch_threads: int | None = 1,
+          final_eval: bool = True) -> RunResult:
+    """Train PPO as ``cfg`` says and write the run folder (see the module docstring).
+
+    :param seed: seed of everything random in training (>= 0).
+    :param run_dir: output folder (default :func:`default_run_dir`); created if missing.
+    :param progress: show SB3's progress bar (tqdm + rich).
+    :param torch_threads: ``torch.set_num_threads`` (1 is fastest for these small networks on
+        a busy 2-core machine); None leaves torch's default.
+    :param final_eval: evaluate the final model on the test set (``evaluation.json``).
+    """
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0 (got {seed!r})")
+    if torch_threads is not None:
+        torch.set_num_threads(int(torch_threads))
+    run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg, seed)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    set_random_seed(seed)
+
+    venv = make_sb3_env(cfg.env_id, cfg.n_envs, cfg.env_kwargs,
+                        bootstrap_truncated=cfg.bootstrap_truncated)
+    env = VecMonitor(venv)
+    ppo_kw = cfg.ppo_kwargs()
+    if cfg.normalize is not None:
+        norm_kw = dict(cfg.normalize)
+        norm_kw.setdefault("gamma", ppo_kw.get("gamma", 0.99))
+        env = VecNormalize(env, **norm_kw)
+    eval_kwargs = eval_env_kwargs(cfg)
+    meta: dict[str, Any] = {
+        "env_id": cfg.env_id, "seed": int(seed), "config_source": _repo_relative(cfg.source),
+        "policy_env": policy_env_fields(venv.unwrapped), "eval_env_kwargs": eval_kwargs,
+        "command": " ".join(sys.argv), "versions": _versions(),
+    }
+    write_config(run_dir, cfg, meta)
+
+    from .policies import POLICIES
+    model = PPO(POLICIES[cfg.policy], env, seed=int(seed), device="cpu", verbose=verbose, **ppo_kw)
+    callbacks = []
+    eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
+                                  cfg.eval_episodes, cfg.eval_seed, meta,
+                                  verbose=max(verbose, int(progress is False)))
+    callbacks.append(eval_cb)
+    if cfg.checkpoint_freq > 0:
+        callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
+                                            str(run_dir / "checkpoints"), name_prefix="ppo",
+                                            save_vecnormalize=cfg.normalize is not None))
+    t0 = time.perf_counter()
+    model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=progress)
+    wall = time.perf_counter() - t0
+    steps = int(model.num_timesteps)
+    model.save(run_dir / "model.zip")
+    vn = model.get_vec_normalize_env()
+    if vn is not None:
+        vn.save(str(run_dir / "vecnormalize.pkl"))
+    meta.update({"wall_time_s": round(wall, 1), "env_steps": steps,
+                 "env_steps_per_s": round(steps / wall, 1),
+                 "evaluations": eval_cb.rows[-1] if eval_cb.rows else None})
+    evaluation: dict[str, Any] = {}
+    if final_eval:
+        evaluation, records = evaluate_model(model, cfg.env_id, eval_kwargs, meta,
+                                             cfg.eval_episodes, cfg.eval_seed)
+        (run_dir / "evaluation.json").write_text(json.dumps(
+            _yaml_safe({"env_id": cfg.env_id, "env_kwargs": eval_kwargs,
+                        "seed": cfg.eval_seed, "summary": evaluation, "episodes": records}),
+            indent=1))
+        meta["final_evaluation"] = brief(evaluation)
+    write_config(run_dir, cfg, meta)
+    env.close()
+    return RunResult(run_dir, wall, steps, steps / wall, evaluation)
+
+
+# ---------------------------------------------------------------------- command line
+def _parse_value(text: str) -> Any:
+    return yaml.safe_load(text)
+
+
+def _pairs(items: Sequence[str] | None, what: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items or ():
+        if "=" not in item:
+            raise ValueError(f"{what} must look like KEY=VALUE (got {item!r})")
+        k, v = item.split("=", 1)
+        out[k.strip()] = _parse_value(v)
+    return out
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    cfg = load_config(args.config, args.env)
+    changes: dict[str, Any] = _pairs(args.hyperparams, "--hyperparams")
+    if args.n_timesteps is not None:
+        changes["n_timesteps"] = int(args.n_timesteps)
+    if args.n_envs is not None:
+        changes["n_envs"] = args.n_envs
+    if args.eval_freq is not None:
+        changes["eval_freq"] = args.eval_freq
+    if args.eval_episodes is not None:
+        changes["eval_episodes"] = args.eval_episodes
+    if args.checkpoint_freq is not None:
+        changes["checkpoint_freq"] = args.checkpoint_freq
+    env_kw = _pairs(args.env_kwargs, "--env-kwargs")
+    if env_kw:
+        changes["env_kwargs"] = env_kw
+    return cfg.with_overrides(**changes) if changes else cfg
+
+
+def _report(res: RunResult) -> None:
+    print(f"run folder: {res.run_dir}")
+    print(f"wall time {res.wall_time_s:.1f} s, {res.env_steps} env steps, "
+          f"{res.env_steps_per_s:.0f} env-steps/s (evaluations included)")
+    s = res.evaluation
+    if s:
+        def fmt(key: str, digits: int = 3) -> str:
+            m = s[key]
+            return (f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, "
+                    f"{m['ci_high']:.{digits}f}]")
+        print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
+              f"residual vibration {fmt('residual_vibration')} W_r/e, time to speed "
+              f"{fmt('time_to_speed', 2)} s, balanced {fmt('balanced', 2)}")
+
+
+def train_trial(config: dict) -> dict:
+    """Trainable for :func:`abb_gym.execution.tune.run_trials` (one seed of a config)."""
+    cfg = TrainConfig.from_mapping(config["env_id"], config["hyperparams"],
+                                   config.get("source", ""))
+    res = train(cfg, seed=int(config["seed"]), run_dir=config["run_dir"], progress=False)
+    out = dict(brief(res.evaluation)) if res.evaluation else {}
+    out.update({"wall_time_s": res.wall_time_s, "env_steps_per_s": res.env_steps_per_s,
+                "run_dir": str(res.run_dir)})
+    return _yaml_safe(out)
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    cfg = config_from_args(args)
+    if args.seeds is None:
+        res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
+                    verbose=args.verbose)
+        _report(res)
+        return 0
+    seeds = list(dict.fromkeys(args.seeds))
+    root = Path(args.out) if args.out else default_run_dir(cfg, 0).parent / time.strftime(
+        "seeds-%Y%m%d-%H%M%S")
+    if args.ray or args.ray_address:
+        from ..execution import Executor
+        from ..execution.tune import grid, run_trials
+        space = {"env_id": cfg.env_id, "hyperparams": cfg.to_mapping(),
+                 "source": cfg.source, "seed": grid(seeds), "run_dir": str(root)}
+        trials = run_trials(_seeded_trial, space,
+                            executor=Executor(ray=True, ray_address=args.ray_address,
+                                              workers=args.workers, progress=False),
+                            metric="return", mode="max", resources_per_trial={"cpu": 2},
+                            name="abb_gym_ppo")
+        for t in trials:
+            print(f"seed {t.config['seed']}: {t.metrics}")
+        return 0
+    if args.workers not in (None, 1):
+        raise ValueError("--workers applies to --ray runs; local seeds train one after the "
+                         "other (each run already uses the machine's cores)")
+    for s in seeds:
+        res = train(cfg, seed=s, run_dir=root / f"s{s}", progress=not args.no_progress,
+                    verbose=args.verbose)
+        _report(res)
+    return 0
+
+
+def _seeded_trial(config: dict) -> dict:
+    """Trainable: one seed, run folder ``<run_dir>/s<seed>``."""
+    config = dict(config)
+    config["run_dir"] = str(Path(config["run_dir"]) / f"s{config['seed']}")
+    return train_trial(config)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``agents/train.py`` entry point (same options as ``abb-gym train``)."""
+    from ..cli.train import add_train_arguments
+    p = argparse.ArgumentParser(prog="train", description=__doc__.split("\n")[0])
+    add_train_arguments(p)
+    args = p.parse_args(argv)
+    try:
+        return run_from_args(args)
+    except ValueError as exc:
+        print(f"train: error: {exc}", file=sys.stderr)
+        return 2

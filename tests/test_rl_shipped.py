@@ -1,0 +1,53 @@
+"""Every shipped agent in ``agents/trained/`` still loads and runs on the current environments.
+
+For each agent: the folder has model.zip, vecnormalize.pkl and config.yml; the saved
+observation and action spaces equal the environment's (built from the agent's ``config.yml``:
+its environment id, scene and policy-relevant settings, on the test preset); the frozen policy
+runs a test episode end to end on that environment and on the default 10 ms control interval
+that ``abb-gym evaluate`` uses (action repeat), with finite actions in [-1, 1].
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("torch")
+
+from abb_gym.rl import load_policy, make_native_env, run_episodes, trained_dir  # noqa: E402
+
+AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "model.zip").exists())
+
+
+def test_agents_are_shipped():
+    assert len(AGENTS) >= 4, f"expected the four shipped agents, found {AGENTS}"
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_shipped_agent_loads_and_runs(name):
+    folder = trained_dir() / name
+    for f in ("model.zip", "vecnormalize.pkl", "config.yml"):
+        assert (folder / f).exists(), f
+        assert (folder / f).stat().st_size < 1_000_000, f"{f} should be a small file"
+    meta = yaml.safe_load((folder / "config.yml").read_text())["_run"]
+    env_id, penv = meta["env_id"], meta["policy_env"]
+    pol = load_policy(name, env_id=env_id, scene=penv["scene"])
+    kwargs = dict(scene=penv["scene"], preset="test", control_interval=penv["control_interval"])
+    if penv.get("observe_balls"):
+        kwargs["observe_balls"] = True
+    env = make_native_env(env_id, 2, kwargs)
+    assert pol.model.observation_space.shape == env.single_observation_space.shape
+    assert pol.model.action_space.shape == env.single_action_space.shape
+    np.testing.assert_array_equal(pol.model.action_space.low, env.single_action_space.low)
+    np.testing.assert_array_equal(pol.model.action_space.high, env.single_action_space.high)
+    assert pol.vecnormalize.obs_rms.mean.shape == env.single_observation_space.shape
+    obs, info = env.reset(seed=0)
+    pol.reset(env, np.ones(2, bool))
+    a = pol.act(obs, info)
+    assert a.shape == (2,) + env.single_action_space.shape
+    assert np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)
+    # one whole test episode on the evaluation's default environment (10 ms interval)
+    extra = {"observe_balls": True} if penv.get("observe_balls") else {}
+    rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **extra)
+    assert np.isfinite(rows[0]["return"])

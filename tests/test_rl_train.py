@@ -1,0 +1,194 @@
+"""PPO pipeline: configs, a short end-to-end run (train, save, load, evaluate), frozen
+normalisation, action repeat and environment checks of a loaded policy.
+
+The end-to-end smoke test trains a few thousand steps through ``abb-gym train`` (well under a
+minute on a 2-core machine).  Full training runs are opt-in (``--runslow``), see
+``test_rl_slow.py``.
+"""
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("torch")
+
+from abb_gym.cli import main as cli_main  # noqa: E402
+from abb_gym.evaluation.policies import resolve  # noqa: E402
+from abb_gym.rl import (PPOPolicy, load_config, load_policy, make_native_env,  # noqa: E402
+                        run_episodes, summarize)
+from abb_gym.rl.config import TrainConfig, configs_dir, eval_env_kwargs  # noqa: E402
+
+SPEED = "abb_gym/RunUpSpeed-v0"
+
+SMOKE = {SPEED: {
+    "n_envs": 4, "n_timesteps": 2048, "policy": "BoundedMlpPolicy",
+    "normalize": {"norm_obs": True, "norm_reward": True},
+    "n_steps": 128, "batch_size": 128, "n_epochs": 2, "gamma": 0.99,
+    "learning_rate": "lin_3.0e-4",
+    "policy_kwargs": {"net_arch": [16, 16], "activation_fn": "Tanh",
+                      "action_mean_init": 0.5},
+    "env_kwargs": {"scene": "yoshida_odd", "preset": "train", "control_interval": 0.05,
+                   "reward": {"residual": 3.0}},
+    "eval_freq": 1024, "eval_episodes": 4, "eval_seed": 5, "checkpoint_freq": 1024,
+}}
+
+
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ppo")
+    cfg = root / "smoke.yml"
+    cfg.write_text(yaml.safe_dump(SMOKE))
+    run = root / "run"
+    code = cli_main(["train", "--config", str(cfg), "--seed", "3", "--out", str(run),
+                     "--no-progress"])
+    assert code == 0
+    return run
+
+
+def test_every_shipped_config_loads():
+    files = sorted(configs_dir().glob("*.yml"))
+    assert files, "configs/ppo has no configs"
+    for f in files:
+        data = yaml.safe_load(f.read_text())
+        for env_id in data:
+            cfg = load_config(f, env_id)
+            assert cfg.n_envs >= 1 and cfg.n_timesteps >= 1
+            cfg.ppo_kwargs()
+            kw = eval_env_kwargs(cfg)
+            # the held-out test preset; the training's reward shaping and randomisation are
+            # not carried over (a config may set eval reward weights for model selection)
+            assert kw["preset"] == "test"
+            assert kw.get("reward") == cfg.eval_env_kwargs.get("reward")
+            assert kw.get("randomize") == cfg.eval_env_kwargs.get("randomize")
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("n_envs", 0, "n_envs must be an integer >= 1"),
+    ("n_timesteps", "many", "n_timesteps must be an integer >= 1"),
+    ("learning_rate", "lin_x", "learning_rate must be a number > 0 or 'lin_<number>'"),
+    ("learning_rate", -1.0, "learning_rate must be a number > 0"),
+    ("policy", "CnnPolicy", "policy must be 'MlpPolicy' or 'BoundedMlpPolicy'"),
+    ("normalize", 3, "normalize must be true, false or a mapping"),
+    ("bogus_key", 1, r"unknown key\(s\) \['bogus_key'\]"),
+    ("policy_kwargs", {"activation_fn": "Nope"}, "activation_fn must name a torch.nn"),
+    ("eval_episodes", 0, "eval_episodes must be an integer >= 1"),
+])
+def test_config_errors_name_the_field(key, value, match):
+    raw = dict(SMOKE[SPEED], **{key: value})
+    with pytest.raises(ValueError, match=match):
+        TrainConfig.from_mapping(SPEED, raw)
+
+
+def test_config_file_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown PPO config"):
+        load_config("no_such_config")
+    f = tmp_path / "two.yml"
+    f.write_text(yaml.safe_dump({SPEED: {}, "abb_gym/RunUpTorque-v0": {}}))
+    with pytest.raises(ValueError, match="choose one with --env"):
+        load_config(f)
+    with pytest.raises(ValueError, match="unknown environment id"):
+        TrainConfig.from_mapping("abb_gym/Nope-v0", {})
+    cfg = load_config(f, SPEED)
+    assert cfg.with_overrides(n_envs=2, env_kwargs={"scene": "spannan_cfrp"}).n_envs == 2
+
+
+def test_smoke_run_writes_the_run_folder(smoke_run):
+    for name in ("model.zip", "vecnormalize.pkl", "config.yml", "evaluations.csv",
+                 "evaluations.npz", "evaluation.json", "best_model.zip",
+                 "best_vecnormalize.pkl"):
+        assert (smoke_run / name).exists(), name
+    assert list((smoke_run / "checkpoints").glob("ppo_*_steps.zip"))
+    assert list((smoke_run / "checkpoints").glob("ppo_vecnormalize_*_steps.pkl"))
+    conf = yaml.safe_load((smoke_run / "config.yml").read_text())
+    run = conf["_run"]
+    assert run["env_id"] == SPEED and run["seed"] == 3
+    assert run["env_steps"] >= 2048 and run["env_steps_per_s"] > 0 and run["wall_time_s"] > 0
+    assert run["policy_env"]["control_interval"] == 0.05
+    assert run["eval_env_kwargs"]["preset"] == "test"
+    ev = json.loads((smoke_run / "evaluation.json").read_text())
+    assert ev["summary"]["episodes"] == 4
+    npz = np.load(smoke_run / "evaluations.npz")
+    assert npz["results"].shape[1] == 4
+    # the run's config.yml trains again as it is (zoo style, keyed by the env id)
+    assert load_config(smoke_run / "config.yml").n_timesteps == 2048
+
+
+def test_load_policy_freezes_normalisation(smoke_run):
+    pol = load_policy(smoke_run, env_id=SPEED)
+    vn = pol.vecnormalize
+    assert vn.training is False and vn.norm_reward is False
+    mean = vn.obs_rms.mean.copy()
+    env = make_native_env(SPEED, 2, dict(scene="yoshida_odd", preset="test",
+                                         control_interval=0.05))
+    obs, info = env.reset(seed=0)
+    pol.reset(env, np.ones(2, bool))
+    for _ in range(5):
+        a = pol.act(obs, info)
+        assert a.shape == (2, 1) and a.dtype == np.float32 and np.all(np.abs(a) <= 1)
+        obs, *_ , info = env.step(a)
+    np.testing.assert_array_equal(vn.obs_rms.mean, mean)
+    with open(smoke_run / "vecnormalize.pkl", "rb") as fh:
+        saved = pickle.load(fh)
+    np.testing.assert_array_equal(saved.obs_rms.mean, mean)
+    with pytest.raises(ValueError, match="trained on abb_gym/RunUpSpeed-v0"):
+        load_policy(smoke_run, env_id="abb_gym/RunUpTorque-v0")
+
+
+def test_evaluate_through_the_policy_registry(smoke_run):
+    # the lead's evaluation resolves ppo:PATH through the loader abb_gym.rl registers;
+    # its test environments use the default 10 ms interval: the 50 ms agent holds each
+    # action for 5 steps
+    pol = resolve(f"ppo:{smoke_run}", SPEED, "yoshida_odd")
+    assert isinstance(pol, PPOPolicy)
+    rows = run_episodes(pol, SPEED, episodes=2, seed=0, scene="yoshida_odd")
+    s = summarize(rows)
+    assert s["episodes"] == 2 and np.isfinite(s["return"]["mean"])
+    assert pol._repeat == 5
+    from abb_gym.evaluation.evaluate import evaluate
+    res = evaluate(SPEED, "yoshida_odd", f"ppo:{smoke_run}", episodes=2, seed=0)
+    assert [e["return"] for e in res.episodes] == pytest.approx([r["return"] for r in rows])
+
+
+def test_action_repeat_holds_actions(smoke_run):
+    pol = load_policy(smoke_run)
+    env = make_native_env(SPEED, 2, dict(scene="yoshida_odd", preset="test"))  # 10 ms
+    obs, info = env.reset(seed=1)
+    pol.reset(env, np.ones(2, bool))
+    acts = []
+    for _ in range(10):
+        a = pol.act(obs, info)
+        acts.append(a.copy())
+        obs, *_ , info = env.step(a)
+    for k in range(1, 5):
+        np.testing.assert_array_equal(acts[k], acts[0])
+    np.testing.assert_array_equal(acts[6], acts[5])
+    assert not np.array_equal(acts[5], acts[0])  # decided again on the new observation
+
+
+def test_policy_rejects_a_mismatched_environment(smoke_run):
+    pol = load_policy(smoke_run)
+    env = make_native_env(SPEED, 1, dict(scene="yoshida_odd", observe_balls=True))
+    with pytest.raises(ValueError, match="observation shape"):
+        pol.reset(env, np.ones(1, bool))
+    pol = load_policy(smoke_run)
+    env = make_native_env(SPEED, 1, dict(scene="yoshida_odd", control_interval=0.02))
+    with pytest.raises(ValueError, match="control_interval"):
+        pol.reset(env, np.ones(1, bool))
+    pol = load_policy(smoke_run)
+    env = make_native_env("abb_gym/RunUpTorque-v0", 1, dict(scene="yoshida_odd",
+                                                            control_interval=0.05))
+    with pytest.raises(ValueError, match="action kind"):
+        pol.reset(env, np.ones(1, bool))
+    with pytest.raises(ValueError, match="no PPO agent"):
+        load_policy(Path(smoke_run) / "nothing_here")
+
+
+def test_train_command_reports_bad_input(capsys):
+    assert cli_main(["train", "--config", "no_such_config"]) == 2
+    assert "unknown PPO config" in capsys.readouterr().err
