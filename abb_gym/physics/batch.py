@@ -92,16 +92,8 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
     steps = 0
     t = t0
     while t < t1:
-        while j + 1 < nseg and seg_d[j + 1, mdl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
-            j += 1
-            integ._pin_prescribed(t, s, seg_d[j], nq)
-        piece_end = t1
-        if j + 1 < nseg and seg_d[j + 1, mdl.D_T0] < piece_end:
-            piece_end = seg_d[j + 1, mdl.D_T0]
-        m = int(math.ceil((piece_end - t) / dt_max - 1e-9))
-        if m < 1:
-            m = 1
-        h = (piece_end - t) / m
+        j = integ.enter_segment(t, s, seg_d, nseg, j, nq)
+        piece_end, m, h = integ.next_piece(t, t1, seg_d, nseg, j, dt_max)
         for i in range(m):
             ti = t + i * h
             if method == integ.METHOD_ETDRK4:

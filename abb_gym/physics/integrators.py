@@ -63,6 +63,29 @@ def _pin_prescribed(t, s, d, nq):
 
 
 @njit(cache=True)
+def enter_segment(t, s, seg_d, nseg, j, nq):
+    """Index of the drive segment that holds ``t``, moving on from segment ``j``; at every
+    segment start passed, the prescribed rotor state is pinned to the exact drive law."""
+    while j + 1 < nseg and seg_d[j + 1, mdl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
+        j += 1
+        _pin_prescribed(t, s, seg_d[j], nq)
+    return j
+
+
+@njit(cache=True)
+def next_piece(t, t_end, seg_d, nseg, j, h_max):
+    """The piece from ``t`` to the next output time or segment start, whichever is first,
+    split into ``m`` equal steps ``h <= h_max``: returns (piece end, m, h)."""
+    piece_end = t_end
+    if j + 1 < nseg and seg_d[j + 1, mdl.D_T0] < piece_end:
+        piece_end = seg_d[j + 1, mdl.D_T0]
+    m = int(math.ceil((piece_end - t) / h_max - 1e-9))
+    if m < 1:
+        m = 1
+    return piece_end, m, (piece_end - t) / m
+
+
+@njit(cache=True)
 def _first_nonfinite(s):
     for j in range(s.shape[0]):
         if not math.isfinite(s[j]):
@@ -313,13 +336,11 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
         t = t_out[kk]
         t_end = t_out[kk + 1]
         while t < t_end:
-            while j + 1 < nseg and seg_t[j + 1] <= t + 1e-12 * (1.0 + abs(t)):
-                j += 1
-                _pin_prescribed(t, s, seg_d[j], nq)
+            j_before = j
+            j = enter_segment(t, s, seg_d, nseg, j, nq)
+            if j != j_before:
                 fsal_valid = False
-            piece_end = t_end
-            if j + 1 < nseg and seg_t[j + 1] < piece_end:
-                piece_end = seg_t[j + 1]
+            piece_end, m, hh = next_piece(t, t_end, seg_d, nseg, j, h)
             d = seg_d[j]
             if method == METHOD_DOPRI5:
                 tp = t
@@ -354,10 +375,6 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
                         if h_adapt < 1e-14 * (1.0 + abs(tp)):
                             return STATUS_STEP_UNDERFLOW, tp, 0, count
             else:
-                m = int(math.ceil((piece_end - t) / h - 1e-9))
-                if m < 1:
-                    m = 1
-                hh = (piece_end - t) / m
                 for i in range(m):
                     ti = t + i * hh
                     if method == METHOD_RK4:
