@@ -12,6 +12,7 @@ import pytest
 from abb_gym import MotorDrive, SceneError, SpeedProfile, load_scene, simulate
 from abb_gym.benchmarks.effects import MEASURED_DISCOIDAL, sommerfeld_discoidal
 from abb_gym.physics import fluids
+from abb_gym.physics import drive_law as dl
 from abb_gym.physics import model as mdl
 from abb_gym.physics.friction import friction_coefficient, friction_secant
 
@@ -57,8 +58,8 @@ def test_contact_forces_are_equal_and_opposite_and_skip_the_rotor():
     p, b = mdl.pack_parameters(scene)
     p0, b0 = mdl.pack_parameters(free)
     rng = np.random.default_rng(0)
-    d = np.zeros(mdl.N_DRIVE)
-    d[mdl.D_MODE], d[mdl.D_TLIM] = mdl.MODE_MOTOR, 1.0
+    d = np.zeros(dl.N_DRIVE)
+    d[dl.D_MODE], d[dl.D_TLIM] = dl.MODE_MOTOR, 1.0
     touching = 0
     for _ in range(30):
         # five balls packed a little closer than touching, in a random place
@@ -171,13 +172,13 @@ def test_nonlinear_drag_reduces_to_the_linear_law_at_low_re():
     pl, bl = mdl.pack_parameters(linear)
     rng = np.random.default_rng(5)
     rho, nu = fluid.fluid_state
-    d = np.zeros(mdl.N_DRIVE)
+    d = np.zeros(dl.N_DRIVE)
     for _ in range(50):
         re = rng.uniform(0.0, 10.0, 2)
         dph = rng.choice([-1, 1], 2) * re * nu / (2e-3 * fluid.race_radius)
         s = np.concatenate([rng.uniform(-1e-4, 1e-4, 2), [0.0], rng.uniform(-3, 3, 2),
                             rng.uniform(-0.05, 0.05, 2), [0.0], dph])
-        d[mdl.D_W0], d[mdl.D_ALPHA] = rng.uniform(0, 250), rng.uniform(-40, 40)
+        d[dl.D_W0], d[dl.D_ALPHA] = rng.uniform(0, 250), rng.uniform(-40, 40)
         qf, ql = np.empty(5), np.empty(5)
         mdl.accelerations(0.0, s, pf, bf, d, qf, mdl.make_work(2))
         mdl.accelerations(0.0, s, pl, bl, d, ql, mdl.make_work(2))
@@ -309,7 +310,7 @@ def test_gravity_gives_the_static_sag(angle, axis):
     s[0:2] = expected
     s[3:5] = angle
     qdd = np.empty(5)
-    mdl.accelerations(0.0, s, p, b, np.zeros(mdl.N_DRIVE), qdd, mdl.make_work(2))
+    mdl.accelerations(0.0, s, p, b, np.zeros(dl.N_DRIVE), qdd, mdl.make_work(2))
     np.testing.assert_allclose(qdd, 0.0, atol=1e-12)
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import abb_gym
-from abb_gym.physics import batch, model as mdl
+from abb_gym.physics import batch, drive_law as dl, model as mdl
 from abb_gym.physics import integrators as integ
 from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics.simulate import default_step, initial_state
@@ -32,7 +32,7 @@ def test_run_batch_equals_rk4_run(scene_name):
     nb = base.ball_count
     ns = 2 * (3 + nb)
     s0 = np.zeros((n, ns))
-    seg_d = np.zeros((n, 5, mdl.N_DRIVE))
+    seg_d = np.zeros((n, 5, dl.N_DRIVE))
     nseg = np.zeros(n, dtype=np.int64)
     p = np.zeros((n, mdl.N_PARAMS))
     b = np.zeros((n, nb, mdl.N_BALL_PARAMS))

@@ -11,10 +11,11 @@ import pytest
 
 import abb_gym
 from abb_gym.benchmarks.numpy_reference import yoshida_accelerations
+from abb_gym.physics import drive_law as dl
 from abb_gym.physics import model as mdl
 from abb_gym.physics.drives import MotorDrive, SpeedProfile
 from abb_gym.physics.scene import load_scene
-from abb_gym.physics.simulate import simulate
+from abb_gym.physics.simulate import default_step, initial_state, simulate
 
 
 def random_scene(rng, n_balls, eccentric=True, orthotropic=True):
@@ -145,10 +146,10 @@ def test_accelerations_match_lagrange_equations_from_kinematics(n_balls, eccentr
              torque - scene.bearing_drag * v[2]],
             -beta * v[3:]])
         ref = np.linalg.solve(kin.mass_matrix(q), gen_force - kin.convective(q, v))
-        d = np.zeros(mdl.N_DRIVE)
-        d[mdl.D_MODE] = mdl.MODE_MOTOR
-        d[mdl.D_TORQUE] = torque
-        d[mdl.D_TLIM] = 1.0
+        d = np.zeros(dl.N_DRIVE)
+        d[dl.D_MODE] = dl.MODE_MOTOR
+        d[dl.D_TORQUE] = torque
+        d[dl.D_TLIM] = 1.0
         qdd = np.empty(len(q))
         mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(n_balls))
         np.testing.assert_allclose(qdd, ref, rtol=2e-5, atol=2e-6 * np.abs(ref).max())
@@ -165,8 +166,8 @@ def test_yoshida_equations_are_a_special_case():
         v = np.concatenate([rng.uniform(-0.5, 0.5, 2), [0.0],
                             rng.choice([-1, 1], 2) * rng.uniform(0.5, 30, 2)])
         psi, dpsi, ddpsi = rng.uniform(0, 50), rng.uniform(0, 250), rng.uniform(-40, 40)
-        d = np.zeros(mdl.N_DRIVE)
-        d[mdl.D_TH0], d[mdl.D_W0], d[mdl.D_ALPHA] = psi, dpsi, ddpsi
+        d = np.zeros(dl.N_DRIVE)
+        d[dl.D_TH0], d[dl.D_W0], d[dl.D_ALPHA] = psi, dpsi, ddpsi
         qdd = np.empty(5)
         mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(2))
         ref = yoshida_accelerations(scene, q, v, psi, dpsi, ddpsi)
@@ -254,8 +255,8 @@ def test_gravity_matches_lagrange_equations_from_kinematics():
             mm = kin.mass_matrix(q)
             mm[3:, 3:] += np.diag(added)
             ref = np.linalg.solve(mm, gen_force - kin.convective(q, v))
-            d = np.zeros(mdl.N_DRIVE)
-            d[mdl.D_MODE], d[mdl.D_TORQUE], d[mdl.D_TLIM] = mdl.MODE_MOTOR, torque, 1.0
+            d = np.zeros(dl.N_DRIVE)
+            d[dl.D_MODE], d[dl.D_TORQUE], d[dl.D_TLIM] = dl.MODE_MOTOR, torque, 1.0
             qdd = np.empty(len(q))
             mdl.accelerations(0.0, np.concatenate([q, v]), p, b, d, qdd, mdl.make_work(n_balls))
             np.testing.assert_allclose(qdd, ref, rtol=2e-5, atol=2e-6 * np.abs(ref).max())
@@ -287,3 +288,64 @@ def test_energy_conserved_with_virtual_mass_gravity_and_elastic_contact():
     touch = [contact_energy(s[:8], b, mdl.B_RADIUS, scene.race_radius,
                             scene.contact_stiffness) for s in tr.states]
     assert max(touch) > 100 * np.ptp(energy)
+
+
+def _without_extended_effects(scene):
+    """The scene with every extended effect switched off (the plain kernel's domain)."""
+    return scene.replace(gravity_acceleration=0.0, contact_stiffness=0.0,
+                         fluid_drag_law="linear", fluid_virtual_mass=0.0,
+                         friction_kinetic=0.0, friction_static=0.0)
+
+
+@pytest.mark.parametrize("name", abb_gym.list_scenes())
+@pytest.mark.parametrize("motor", [False, True])
+def test_extended_specialisation_equals_the_plain_one_on_every_shipped_scene(name, motor):
+    """The one accelerations body compiled twice: with every extended effect off, forcing the
+    extended specialisation (P_EXT = 1) must give the plain one's trajectory bit for bit, for
+    a prescribed and a motor drive (the torque-speed envelope is the extended path too)."""
+    from abb_gym.physics import integrators as integ
+    scene = _without_extended_effects(load_scene(name))
+    assert not scene.effects & mdl.EXTENDED_EFFECTS
+    drive = (MotorDrive.limited_power(0.05, scene.drive_operating_speed) if motor
+             else SpeedProfile.dwell(0.5 * scene.drive_max_acceleration, scene.critical_speed,
+                                     0.3, 0.0, scene.drive_operating_speed))
+    p, b = mdl.pack_parameters(scene)
+    s0 = initial_state(scene, drive,
+                                                 np.linspace(0.3, 2.0, scene.ball_count))
+    t_out = np.linspace(0.0, 2.0, 201)
+    seg_t, seg_d = drive.segment_table(2.0, scene)
+    h = default_step(scene, scene.drive_operating_speed)
+    runs = []
+    for ext in (0.0, 1.0):
+        p[mdl.P_EXT] = ext
+        out = np.empty((t_out.size, s0.size))
+        status = integ.rk4_run(s0, t_out, seg_t, seg_d, p, b, h, out)
+        assert status[0] == integ.STATUS_OK
+        runs.append(out)
+    assert np.array_equal(runs[0], runs[1])
+    lam = [np.empty(s0.size), np.empty(s0.size)]
+    mdl.drag_rates_plain(0.3, runs[0][30], p, b, seg_d[0], lam[0])
+    mdl.drag_rates_extended(0.3, runs[0][30], p, b, seg_d[0], lam[1])
+    assert np.array_equal(lam[0], lam[1])
+
+
+def test_drive_classes_evaluate_the_kernel_drive_law():
+    """SpeedProfile and MotorDrive evaluate speeds and torques with the kernel's own drive law
+    (one implementation), and that law is the documented one."""
+    prof = SpeedProfile.dwell(40.0, 100.0, 0.5, -10.0, 236.0)
+    seg_t, rows = prof.segment_table(100.0)
+    t = np.array([0.0, 1.0, 2.5, 2.7, 3.0, 9.0])
+    th, w, alpha = dl.prescribed_profile(t, rows)
+    assert np.array_equal(prof.speed(t), w) and np.array_equal(prof.angle(t), th)
+    assert np.array_equal(prof.acceleration(t), alpha)
+    assert prof.speed(2.7) == pytest.approx(100.0 - 10.0 * 0.2)
+    scene = load_scene("yoshida_odd")
+    motor = MotorDrive.linear_characteristic(1e-2, 300.0, power_limit=0.5)
+    seg_t, rows = motor.segment_table(10.0, scene)
+    speeds = np.array([0.0, 50.0, 100.0, 200.0, 320.0])
+    times = np.zeros(5)
+    # T = stall (1 - w / w_0), clipped to +-min(stall, P / |w|): it brakes above w_0
+    limits = [min(1e-2, 0.5 / v if v else np.inf) for v in speeds]
+    want = [np.clip(1e-2 / 300.0 * (300.0 - v), -e, e) for v, e in zip(speeds, limits)]
+    assert np.allclose(motor.torque_at(times, speeds, scene), want, rtol=1e-12, atol=1e-15)
+    assert np.array_equal(motor.torque_at(times, speeds, scene), dl.motor_torques(times, speeds, rows))

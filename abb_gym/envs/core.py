@@ -29,6 +29,7 @@ from numba import njit, prange
 
 from ..physics import batch
 from ..physics import integrators as integ
+from ..physics import drive_law as dl
 from ..physics import model as mdl
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene, load_scene
@@ -179,14 +180,14 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     # control effort: time integral of (drive command / its limit)^2 over the interval
     effort = 0.0
     for r in range(nseg):
-        ts = d[i, r, mdl.D_T0]
-        te = d[i, r + 1, mdl.D_T0] if r + 1 < nseg else math.inf
+        ts = d[i, r, dl.D_T0]
+        te = d[i, r + 1, dl.D_T0] if r + 1 < nseg else math.inf
         ov = min(t1, te) - max(t0, ts)
         if ov > 0.0:
-            if d[i, r, mdl.D_MODE] == mdl.MODE_PRESCRIBED:
-                u = d[i, r, mdl.D_ALPHA] / cfg[C_AMAX]
+            if d[i, r, dl.D_MODE] == dl.MODE_PRESCRIBED:
+                u = d[i, r, dl.D_ALPHA] / cfg[C_AMAX]
             else:
-                u = d[i, r, mdl.D_TORQUE] / cfg[C_TLIM]
+                u = d[i, r, dl.D_TORQUE] / cfg[C_TLIM]
             effort += u * u * ov
     tref = cfg[C_TREF]
     vib = -cfg[C_WV] * (r_mean / st[i, S_AREF]) * dt / tref
@@ -279,13 +280,13 @@ def _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
     t0 = st[i, S_K] * cfg[C_DT]
     if kind == KIND_TORQUE:
         row = d[i, 0]
-        row[mdl.D_T0] = t0
-        row[mdl.D_MODE] = mdl.MODE_MOTOR
-        row[mdl.D_TORQUE] = st[i, S_ACT] * cfg[C_TLIM]
-        row[mdl.D_GAIN] = 0.0
-        row[mdl.D_TW0] = 0.0
-        row[mdl.D_TALPHA] = 0.0
-        row[mdl.D_TLIM] = cfg[C_TLIM]
+        row[dl.D_T0] = t0
+        row[dl.D_MODE] = dl.MODE_MOTOR
+        row[dl.D_TORQUE] = st[i, S_ACT] * cfg[C_TLIM]
+        row[dl.D_GAIN] = 0.0
+        row[dl.D_TW0] = 0.0
+        row[dl.D_TALPHA] = 0.0
+        row[dl.D_TLIM] = cfg[C_TLIM]
         st[i, S_NSEG] = 1.0
         st[i, S_J] = 0.0
         done = _interval(i, s, p, b, d, st, cfg, out, ws, work)
@@ -300,11 +301,11 @@ def _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
         if alpha < lo:
             alpha = lo
         row = d[i, 0]
-        row[mdl.D_T0] = t0
-        row[mdl.D_TH0] = s[i, 2]
-        row[mdl.D_W0] = w
-        row[mdl.D_ALPHA] = alpha
-        row[mdl.D_MODE] = mdl.MODE_PRESCRIBED
+        row[dl.D_T0] = t0
+        row[dl.D_TH0] = s[i, 2]
+        row[dl.D_W0] = w
+        row[dl.D_ALPHA] = alpha
+        row[dl.D_MODE] = dl.MODE_PRESCRIBED
         st[i, S_NSEG] = 1.0
         st[i, S_J] = 0.0
         done = _interval(i, s, p, b, d, st, cfg, out, ws, work)
@@ -468,7 +469,7 @@ class Buffers:
         self.s = np.zeros((n, ns))
         self.p = np.zeros((n, mdl.N_PARAMS))
         self.b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
-        self.d = np.zeros((n, setup.n_rows, mdl.N_DRIVE))
+        self.d = np.zeros((n, setup.n_rows, dl.N_DRIVE))
         self.st = np.zeros((n, N_ST))
         self.st[:, S_DONE] = 1.0
         self.st[:, S_USCALE] = 1.0
@@ -707,14 +708,14 @@ class EnvSetup:
         d = bufs.d[i]
         d[:] = 0.0
         if self.kind == "speed":
-            d[0, mdl.D_TH0] = ep.imbalance_phase
-            d[0, mdl.D_MODE] = mdl.MODE_PRESCRIBED
+            d[0, dl.D_TH0] = ep.imbalance_phase
+            d[0, dl.D_MODE] = dl.MODE_PRESCRIBED
         elif self.kind == "torque":
-            d[0, mdl.D_MODE] = mdl.MODE_MOTOR
-            d[0, mdl.D_TLIM] = self.torque_limit
+            d[0, dl.D_MODE] = dl.MODE_MOTOR
+            d[0, dl.D_TLIM] = self.torque_limit
         else:
-            d[:, mdl.D_TH0] = ep.imbalance_phase
-            d[:, mdl.D_MODE] = mdl.MODE_PRESCRIBED
+            d[:, dl.D_TH0] = ep.imbalance_phase
+            d[:, dl.D_MODE] = dl.MODE_PRESCRIBED
         bufs.act[i] = 0.0
 
     # ------------------------------------------------------------------ dwell actions

@@ -43,6 +43,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import integrators as integ
+from . import drive_law as dl
 from . import model as mdl
 
 __all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS",
@@ -111,7 +112,7 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
             if r > whirl[1]:
                 whirl[1] = r
         t = piece_end
-        integ._pin_prescribed(t, s, seg_d[j], nq)
+        dl.pin_prescribed(t, s, seg_d[j], nq)
     return integ.STATUS_OK, j, t1, -1, steps
 
 
@@ -133,9 +134,9 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work,
         whirl = np.zeros(4)
         j = 0
         ns_e = nseg[e]
-        while j + 1 < ns_e and seg_d[e, j + 1, mdl.D_T0] <= t_out[0]:
+        while j + 1 < ns_e and seg_d[e, j + 1, dl.D_T0] <= t_out[0]:
             j += 1
-        integ._pin_prescribed(t_out[0], s, seg_d[e, j], nq)
+        dl.pin_prescribed(t_out[0], s, seg_d[e, j], nq)
         out[e, 0, :] = s
         total = 0
         st = integ.STATUS_OK

@@ -37,7 +37,8 @@ from typing import Sequence
 
 import numpy as np
 
-from . import model as mdl
+from . import drive_law as dl
+
 from .scene import Scene
 
 __all__ = ["SpeedProfile", "MotorDrive"]
@@ -155,11 +156,11 @@ class SpeedProfile:
         return self._table()[0]
 
     def _evaluate(self, t):
-        t0, th0, w0, acc = self._table()
         t = np.asarray(t, dtype=float)
-        k = np.clip(np.searchsorted(t0, t, side="right") - 1, 0, len(t0) - 1)
-        tau = t - t0[k]
-        return th0[k] + w0[k] * tau + 0.5 * acc[k] * tau * tau, w0[k] + acc[k] * tau, acc[k]
+        th, w, alpha = dl.prescribed_profile(np.atleast_1d(t).ravel(), self.segment_table(math.inf)[1])
+        if t.ndim == 0:
+            return th[0], w[0], alpha[0]
+        return th.reshape(t.shape), w.reshape(t.shape), alpha.reshape(t.shape)
 
     def angle(self, t):
         """Rotor angle psi(t) [rad]."""
@@ -171,7 +172,7 @@ class SpeedProfile:
 
     def acceleration(self, t):
         """Rotor acceleration psi''(t) [rad/s^2] (right-continuous at breakpoints)."""
-        return self._evaluate(t)[2] + np.zeros(np.shape(t))
+        return self._evaluate(t)[2]
 
     def max_speed(self, t_end: float) -> float:
         """Largest speed [rad/s] on [0, t_end]."""
@@ -184,13 +185,13 @@ class SpeedProfile:
         t0, th0, w0, acc = self._table()
         keep = t0 < t_end
         keep[0] = True
-        rows = np.zeros((int(keep.sum()), mdl.N_DRIVE))
-        rows[:, mdl.D_T0] = t0[keep]
-        rows[:, mdl.D_TH0] = th0[keep]
-        rows[:, mdl.D_W0] = w0[keep]
-        rows[:, mdl.D_ALPHA] = acc[keep]
-        rows[:, mdl.D_MODE] = mdl.MODE_PRESCRIBED
-        return rows[:, mdl.D_T0].copy(), rows
+        rows = np.zeros((int(keep.sum()), dl.N_DRIVE))
+        rows[:, dl.D_T0] = t0[keep]
+        rows[:, dl.D_TH0] = th0[keep]
+        rows[:, dl.D_W0] = w0[keep]
+        rows[:, dl.D_ALPHA] = acc[keep]
+        rows[:, dl.D_MODE] = dl.MODE_PRESCRIBED
+        return rows[:, dl.D_T0].copy(), rows
 
     def initial_rotor_state(self) -> tuple[float, float]:
         """(angle [rad], speed [rad/s]) at t = 0."""
@@ -270,30 +271,24 @@ class MotorDrive:
             t0, w0, acc = t0[keep], w0[keep], acc[keep]
         else:
             t0, w0, acc = np.zeros(1), np.array([float(self.target)]), np.zeros(1)
-        rows = np.zeros((len(t0), mdl.N_DRIVE))
-        rows[:, mdl.D_T0] = t0
-        rows[:, mdl.D_MODE] = mdl.MODE_MOTOR
-        rows[:, mdl.D_TORQUE] = self.torque
-        rows[:, mdl.D_GAIN] = self.speed_gain
-        rows[:, mdl.D_TW0] = w0
-        rows[:, mdl.D_TALPHA] = acc
-        rows[:, mdl.D_TLIM] = self.limit(scene)
-        rows[:, mdl.D_WNL] = self.no_load_speed or 0.0
-        rows[:, mdl.D_PLIM] = self.power_limit or 0.0
+        rows = np.zeros((len(t0), dl.N_DRIVE))
+        rows[:, dl.D_T0] = t0
+        rows[:, dl.D_MODE] = dl.MODE_MOTOR
+        rows[:, dl.D_TORQUE] = self.torque
+        rows[:, dl.D_GAIN] = self.speed_gain
+        rows[:, dl.D_TW0] = w0
+        rows[:, dl.D_TALPHA] = acc
+        rows[:, dl.D_TLIM] = self.limit(scene)
+        rows[:, dl.D_WNL] = self.no_load_speed or 0.0
+        rows[:, dl.D_PLIM] = self.power_limit or 0.0
         return t0.copy(), rows
 
     def torque_at(self, t, speed, scene: Scene):
-        """Motor torque [N m] at times ``t`` and rotor speeds ``speed``."""
-        target = self.target.speed(t) if isinstance(self.target, SpeedProfile) \
-            else np.full(np.shape(t), float(self.target))
-        speed = np.asarray(speed, dtype=float)
-        lim = np.full(np.shape(speed), self.limit(scene))
-        if self.no_load_speed:
-            lim = lim * np.maximum(0.0, 1.0 - np.abs(speed) / self.no_load_speed)
-        if self.power_limit:
-            with np.errstate(divide="ignore"):
-                lim = np.minimum(lim, self.power_limit / np.abs(speed))
-        return np.clip(self.torque + self.speed_gain * (target - speed), -lim, lim)
+        """Motor torque [N m] at times ``t`` and rotor speeds ``speed`` (the kernel's law)."""
+        t, speed = np.broadcast_arrays(np.asarray(t, dtype=float), np.asarray(speed, dtype=float))
+        rows = self.segment_table(math.inf, scene)[1]
+        out = dl.motor_torques(t.ravel().copy(), speed.ravel().copy(), rows)
+        return out[0] if t.ndim == 0 else out.reshape(t.shape)
 
     def initial_rotor_state(self) -> tuple[float, float]:
         return self.initial_angle, self.initial_speed

@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 from scipy.integrate import solve_ivp
 
+from . import drive_law as dl
 from . import model as mdl
 
 STATUS_OK = 0
@@ -54,21 +55,12 @@ ADAPTIVE = ("dopri5",)
 
 # --------------------------------------------------------------------------- helpers
 @njit(cache=True)
-def _pin_prescribed(t, s, d, nq):
-    """Set th, th' to the exact drive law (no drift in the prescribed rotor angle)."""
-    if d[mdl.D_MODE] == mdl.MODE_PRESCRIBED:
-        tau = t - d[mdl.D_T0]
-        s[2] = d[mdl.D_TH0] + d[mdl.D_W0] * tau + 0.5 * d[mdl.D_ALPHA] * tau * tau
-        s[nq + 2] = d[mdl.D_W0] + d[mdl.D_ALPHA] * tau
-
-
-@njit(cache=True)
 def enter_segment(t, s, seg_d, nseg, j, nq):
     """Index of the drive segment that holds ``t``, moving on from segment ``j``; at every
     segment start passed, the prescribed rotor state is pinned to the exact drive law."""
-    while j + 1 < nseg and seg_d[j + 1, mdl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
+    while j + 1 < nseg and seg_d[j + 1, dl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
         j += 1
-        _pin_prescribed(t, s, seg_d[j], nq)
+        dl.pin_prescribed(t, s, seg_d[j], nq)
     return j
 
 
@@ -77,8 +69,8 @@ def next_piece(t, t_end, seg_d, nseg, j, h_max):
     """The piece from ``t`` to the next output time or segment start, whichever is first,
     split into ``m`` equal steps ``h <= h_max``: returns (piece end, m, h)."""
     piece_end = t_end
-    if j + 1 < nseg and seg_d[j + 1, mdl.D_T0] < piece_end:
-        piece_end = seg_d[j + 1, mdl.D_T0]
+    if j + 1 < nseg and seg_d[j + 1, dl.D_T0] < piece_end:
+        piece_end = seg_d[j + 1, dl.D_T0]
     m = int(math.ceil((piece_end - t) / h_max - 1e-9))
     if m < 1:
         m = 1
@@ -327,7 +319,7 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
     j = 0
     while j + 1 < nseg and seg_t[j + 1] <= t_out[0]:
         j += 1
-    _pin_prescribed(t_out[0], s, seg_d[j], nq)
+    dl.pin_prescribed(t_out[0], s, seg_d[j], nq)
     out[0, :] = s
     count = 0
     h_adapt = h
@@ -388,8 +380,8 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
                     if bad >= 0:
                         return STATUS_NONFINITE, ti + hh, bad, count
             t = piece_end
-            _pin_prescribed(t, s, d, nq)
-            if d[mdl.D_MODE] == mdl.MODE_PRESCRIBED:
+            dl.pin_prescribed(t, s, d, nq)
+            if d[dl.D_MODE] == dl.MODE_PRESCRIBED:
                 fsal_valid = False  # the pinned state may differ from the FSAL state by rounding
         out[kk + 1, :] = s
     return STATUS_OK, t_out[-1], -1, count
@@ -419,7 +411,7 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
     for a, z in zip(bounds[:-1], bounds[1:]):
         j = int(np.searchsorted(seg_t, a + 1e-12 * (1 + abs(a)), side="right") - 1)
         d = seg_d[max(j, 0)]
-        _pin_prescribed(a, s, d, nq)
+        dl.pin_prescribed(a, s, d, nq)
         if a == t_out[0]:
             out[0] = s
 

@@ -60,8 +60,10 @@ Decisions recorded here:
 * The rotor row carries no reaction of the race drag or the rolling resistance: both act
   between ball and rotor and do virtual work only on the relative coordinate ph_i.
 
-Extended physics (each switched per scene by its parameters, :attr:`Scene.effects`; the kernel
-tests a flag per effect and skips the terms of an effect that is off):
+Extended physics (each switched per scene by its parameters, :attr:`Scene.effects`).  The
+equations are written once (:func:`_accelerations_body`) and compiled twice: a scene with no
+extended effect runs the plain specialisation, in which their terms do not exist; in the
+extended one each effect's terms run only where its flag is set:
 
 * **Gravity** (``gravity``, horizontal-axis rotors): g along (cos a, sin a) in the fixed
   frame, a = ``gravity_angle`` (default -pi/2).  From V = -g . (sum of mass x position)
@@ -87,8 +89,9 @@ tests a flag per effect and skips the terms of an effect that is off):
 * **Friction and stick** (``friction``/``stiction``): ``Q_fric,i = -mu(R ph') R |N_i|`` with
   the regularised Coulomb/Stribeck law of :mod:`abb_gym.physics.friction`; it shares the
   normal force (and so the left-hand-side acceleration terms) with the rolling resistance.
-* The limited-power drive needs no new equations: the motor torque of :func:`drive_state`
-  gets an available-torque envelope (linear torque-speed characteristic, power limit).
+* The limited-power drive needs no new equations: the motor torque
+  (:func:`abb_gym.physics.drive_law.motor_torque`) gets an available-torque envelope (linear
+  torque-speed characteristic, power limit).
 
 Solution: the ball block of the matrix is diagonal, so the balls are eliminated with a Schur
 complement and only a 2x2 (prescribed speed) or 3x3 (rotor spin as a DOF) system is solved.
@@ -102,6 +105,7 @@ import numpy as np
 from numba import njit
 
 from . import contact as _contact
+from . import drive_law as dl
 from . import fluids as _fluids
 from .friction import friction_coefficient, friction_secant
 from .scene import Scene
@@ -125,14 +129,6 @@ EXTENDED_EFFECTS = frozenset({"gravity", "ball_contact", "fluid_drag", "virtual_
 B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
 B_VM, B_KLIN, B_KQUAD, B_REU, B_MEFF = range(5, 10)
 N_BALL_PARAMS = 10
-# drive row layout: one row per segment of piecewise-constant drive law; D_WNL (no-load speed
-# [rad/s] of a linear torque-speed envelope, 0 = none) and D_PLIM (power limit [W], 0 = none)
-# were appended for the limited-power drive
-(D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM, D_WNL,
- D_PLIM) = range(12)
-N_DRIVE = 12
-MODE_PRESCRIBED = 0.0
-MODE_MOTOR = 1.0
 # scratch columns of accelerations(): 0-7 the ball rows, 8-9 the contact forces
 WORK_COLUMNS = 10
 W_QC = 8  # generalised contact force on the ball [N m]
@@ -277,69 +273,26 @@ def gravity_energy(q, p, b):
     return -(p[P_GX] * sx + p[P_GY] * sy)
 
 
-@njit(cache=True)
-def _available_torque(lim, w, no_load_speed, power):
-    """Torque limit [N m] at speed ``w`` [rad/s]: a linear torque-speed envelope falling to 0
-    at ``no_load_speed`` and a power limit |T w| <= ``power`` [W] (each only when > 0)."""
-    if no_load_speed > 0.0:
-        lim *= max(0.0, 1.0 - abs(w) / no_load_speed)
-    if power > 0.0 and abs(w) * lim > power:
-        lim = power / abs(w)
-    return lim
 
-
-@njit(cache=True)
-def motor_torque(t, w, d):
-    """Motor torque [N m] of drive row ``d`` at time ``t`` and rotor speed ``w``, clipped to the
-    available torque (:func:`_available_torque`)."""
-    torque = d[D_TORQUE] + d[D_GAIN] * (d[D_TW0] + d[D_TALPHA] * (t - d[D_T0]) - w)
-    lim = _available_torque(d[D_TLIM], w, d[D_WNL], d[D_PLIM])
-    return min(lim, max(-lim, torque))
-
-
-@njit(cache=True)
-def drive_state(t, s, d, nq):
-    """(rotor angle, rotor speed, prescribed acceleration or NaN, motor torque) at time t.
-
-    The torque is clipped to the constant limit D_TLIM only; drives with a torque-speed
-    envelope (D_WNL, D_PLIM) get their torque from :func:`motor_torque` in the extended kernel.
-    The envelope is kept out of this function because any extra branch here costs ~10 % of a
-    right-hand side (it stops LLVM from inlining this function)."""
-    tau = t - d[D_T0]
-    if d[D_MODE] == MODE_PRESCRIBED:
-        alpha = d[D_ALPHA]
-        w = d[D_W0] + alpha * tau
-        th = d[D_TH0] + d[D_W0] * tau + 0.5 * alpha * tau * tau
-        return th, w, alpha, 0.0
-    th = s[2]
-    w = s[nq + 2]
-    torque = d[D_TORQUE] + d[D_GAIN] * (d[D_TW0] + d[D_TALPHA] * tau - w)
-    lim = d[D_TLIM]
-    if torque > lim:
-        torque = lim
-    elif torque < -lim:
-        torque = -lim
-    return th, w, np.nan, torque
-
-
-@njit(cache=True)
-def _accelerations_ext(t, s, p, b, d, qdd, work):
-    """:func:`accelerations` with the extended effects (gravity, contact, fluid drag, virtual
-    mass, friction, torque-speed envelope); each is evaluated only when its flag is set."""
+@njit(cache=True, inline="always")
+def _accelerations_body(t, s, p, b, d, qdd, work, extended):
+    """The equations of motion (module docstring), once.  ``extended`` is a compile-time
+    constant: False leaves out every term of the extended effects and the drive envelope,
+    so that specialisation compiles to the kernel of a scene that switches nothing on; the
+    operations the two specialisations share run in the same order, so a scene without
+    extended effects gets bit-identical results from both (``tests/test_model.py``)."""
     n = b.shape[0]
     nq = 3 + n
     x, y = s[0], s[1]
     vx, vy = s[nq], s[nq + 1]
-    th, w, alpha, torque = drive_state(t, s, d, nq)
-    prescribed = d[D_MODE] == MODE_PRESCRIBED
-    if not prescribed and (d[D_WNL] != 0.0 or d[D_PLIM] != 0.0):
-        torque = motor_torque(t, w, d)
+    th, w, alpha, torque = dl.drive_state(t, s, d, nq, extended)
+    prescribed = d[dl.D_MODE] == dl.MODE_PRESCRIBED
     ecc = p[P_ECC] != 0.0
     roll = p[P_ROLL] != 0.0
-    grav = p[P_GRAV] != 0.0
-    touch = p[P_KC] != 0.0
-    dlaw = p[P_DLAW]
-    fric = p[P_FRIC] != 0.0
+    grav = extended and p[P_GRAV] != 0.0
+    touch = extended and p[P_KC] != 0.0
+    dlaw = p[P_DLAW] if extended else 0.0
+    fric = extended and p[P_FRIC] != 0.0
     resist = roll or fric
     gx = p[P_GX]
     gy = p[P_GY]
@@ -374,7 +327,8 @@ def _accelerations_ext(t, s, p, b, d, qdd, work):
         sp = math.sin(th + ph)
         cp = math.cos(th + ph)
         colx, coly, ci, ii, jti = _ball_coupling(th, ph, p, b, i)
-        ii += b[i, B_VM]
+        if extended:
+            ii += b[i, B_VM]
         sx -= colx
         cy += coly
         jt += jti
@@ -498,6 +452,25 @@ def _accelerations_ext(t, s, p, b, d, qdd, work):
     return torque
 
 
+@njit(cache=True)
+def accelerations_plain(t, s, p, b, d, qdd, work):
+    """:func:`accelerations` of a scene without extended effects and a drive row without an
+    envelope (the compiled specialisation with ``extended=False``)."""
+    return _accelerations_body(t, s, p, b, d, qdd, work, False)
+
+
+@njit(cache=True)
+def accelerations_extended(t, s, p, b, d, qdd, work):
+    """:func:`accelerations` with every extended effect evaluated where its flag is set."""
+    return _accelerations_body(t, s, p, b, d, qdd, work, True)
+
+
+@njit(cache=True, inline="always")
+def uses_extended(p, d):
+    """True if the scene parameters ``p`` or drive row ``d`` need the extended kernel."""
+    return p[P_EXT] != 0.0 or dl.needs_envelope(d)
+
+
 @njit(cache=True, inline="always")
 def accelerations(t, s, p, b, d, qdd, work):
     """Fill ``qdd`` (length 3 + n) with the generalised accelerations at state ``s``.
@@ -507,136 +480,15 @@ def accelerations(t, s, p, b, d, qdd, work):
     entries are ignored) and qdd[2] is the prescribed acceleration.  Returns the motor torque
     [N m] (0 if prescribed).
 
-    Scenes with an extended effect on (``p[P_EXT]``) and drives with a torque-speed envelope
-    go to :func:`_accelerations_ext`; everything else runs the code below, which is the kernel
-    as it was before the extension.  One kernel with a flag per effect inside measured 10-20 %
-    slower per right-hand side on scenes that switch nothing on (code size defeats LLVM's
-    inlining of the helpers); the early exit costs ~3 %.
+    Dispatches to one of the two specialisations of the single body
+    :func:`_accelerations_body`: a scene with no extended effect runs the plain one.  (One
+    kernel testing a run-time flag per effect measured 10-20 % slower per right-hand side on
+    scenes that switch nothing on: code size defeats LLVM's inlining; the dispatch costs ~3 %.)
     """
-    if p[P_EXT] != 0.0 or d[D_WNL] != 0.0 or d[D_PLIM] != 0.0:
-        return _accelerations_ext(t, s, p, b, d, qdd, work)
-    n = b.shape[0]
-    nq = 3 + n
-    x, y = s[0], s[1]
-    vx, vy = s[nq], s[nq + 1]
-    th, w, alpha, torque = drive_state(t, s, d, nq)
-    prescribed = d[D_MODE] == MODE_PRESCRIBED
-    ecc = p[P_ECC] != 0.0
-    roll = p[P_ROLL] != 0.0
-    big_r = p[P_R]
-    e = p[P_E]
-    gam = p[P_GAM]
-    w2 = w * w
-    sth = math.sin(th)
-    cth = math.cos(th)
-    total = p[P_MASS]
-    sx = p[P_U0] * sth
-    cy = p[P_U0] * cth
-    fx = -p[P_CX] * vx - p[P_KX] * x + p[P_U0] * cth * w2
-    fy = -p[P_CY] * vy - p[P_KY] * y + p[P_U0] * sth * w2
-    fth = torque - p[P_BETA0] * w
-    jt = p[P_J]
-    if ecc:
-        stg = math.sin(th + gam)
-        ctg = math.cos(th + gam)
-    else:
-        stg = 0.0
-        ctg = 0.0
-    for i in range(n):
-        m = b[i, B_MASS]
-        ph = s[3 + i]
-        dph = s[nq + 3 + i]
-        mr = m * big_r
-        sp = math.sin(th + ph)
-        cp = math.cos(th + ph)
-        colx, coly, ci, ii, jti = _ball_coupling(th, ph, p, b, i)
-        sx -= colx
-        cy += coly
-        jt += jti
-        wrel2 = (w + dph) * (w + dph)
-        fx += mr * wrel2 * cp
-        fy += mr * wrel2 * sp
-        fi = -b[i, B_BETA] * dph
-        bx = colx
-        by = coly
-        bth = ci
-        if ecc:
-            sgp = math.sin(gam - ph)
-            cgp = math.cos(gam - ph)
-            sx += e * m * stg
-            cy += e * m * ctg
-            fx += e * m * ctg * w2
-            fy += e * m * stg * w2
-            fth -= e * mr * sgp * dph * (2.0 * w + dph)
-            fi += mr * e * sgp * w2
-        if roll:
-            kr = b[i, B_MUR] * mr * math.tanh(big_r * dph / p[P_UREG])
-            fi -= kr * big_r * wrel2
-            bx -= kr * cp
-            by -= kr * sp
-            if ecc:
-                fi -= kr * e * w2 * cgp
-                bth += kr * e * sgp
-        work[i, 0] = bx
-        work[i, 1] = by
-        work[i, 2] = bth
-        work[i, 3] = fi
-        work[i, 4] = ii
-        work[i, 5] = colx
-        work[i, 6] = coly
-        work[i, 7] = ci
-    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] and its Schur complement
-    a00 = total
-    a01 = 0.0
-    a10 = 0.0
-    a11 = total
-    a02 = -sx
-    a12 = cy
-    a20 = -sx
-    a21 = cy
-    a22 = jt
-    if prescribed:
-        fx -= a02 * alpha
-        fy -= a12 * alpha
-    for i in range(n):
-        bx, by, bth, fi, ii = work[i, 0], work[i, 1], work[i, 2], work[i, 3], work[i, 4]
-        colx, coly, ci = work[i, 5], work[i, 6], work[i, 7]
-        if prescribed:
-            fi -= bth * alpha
-        inv = 1.0 / ii
-        a00 -= colx * bx * inv
-        a01 -= colx * by * inv
-        a10 -= coly * bx * inv
-        a11 -= coly * by * inv
-        fx -= colx * fi * inv
-        fy -= coly * fi * inv
-        if not prescribed:
-            a02 -= colx * bth * inv
-            a12 -= coly * bth * inv
-            a20 -= ci * bx * inv
-            a21 -= ci * by * inv
-            a22 -= ci * bth * inv
-            fth -= ci * fi * inv
-    if prescribed:
-        det = a00 * a11 - a01 * a10
-        ax = (fx * a11 - a01 * fy) / det
-        ay = (a00 * fy - a10 * fx) / det
-        ath = alpha
-    else:
-        c00 = a11 * a22 - a12 * a21
-        c01 = a12 * a20 - a10 * a22
-        c02 = a10 * a21 - a11 * a20
-        det = a00 * c00 + a01 * c01 + a02 * c02
-        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
-        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
-        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
-    qdd[0] = ax
-    qdd[1] = ay
-    qdd[2] = ath
-    for i in range(n):
-        qdd[3 + i] = (work[i, 3] - work[i, 0] * ax - work[i, 1] * ay - work[i, 2] * ath) \
-            / work[i, 4]
-    return torque
+    if uses_extended(p, d):
+        return accelerations_extended(t, s, p, b, d, qdd, work)
+    # the plain body inlined here rather than called: as a call it cost ~12 %
+    return _accelerations_body(t, s, p, b, d, qdd, work, False)
 
 
 def make_work(n_balls: int) -> np.ndarray:
@@ -652,9 +504,8 @@ def state_derivative(t, s, p, b, d, ds, qdd, work):
     for k in range(nq):
         ds[k] = s[nq + k]
         ds[nq + k] = qdd[k]
-    if d[D_MODE] == MODE_PRESCRIBED:
-        tau = t - d[D_T0]
-        ds[2] = d[D_W0] + d[D_ALPHA] * tau
+    if d[dl.D_MODE] == dl.MODE_PRESCRIBED:
+        ds[2] = dl.prescribed_state(t, d)[1]
 
 
 @njit(cache=True)
@@ -673,40 +524,55 @@ def total_energy(s, p, b):
     return e
 
 
-@njit(cache=True)
-def _drag_rates_ext(t, s, p, b, d, lam):
-    """:func:`drag_rates` with the extended effects."""
+@njit(cache=True, inline="always")
+def _drag_rates_body(t, s, p, b, d, lam, extended):
+    """:func:`drag_rates`, once; ``extended`` as in :func:`_accelerations_body`."""
     n = b.shape[0]
     nq = 3 + n
-    th, w, alpha, torque = drive_state(t, s, d, nq)
+    th, w, alpha, torque = dl.drive_state(t, s, d, nq, extended)
     for j in range(2 * nq):
         lam[j] = 0.0
     big_r = p[P_R]
     for i in range(n):
         m = b[i, B_MASS]
         r = b[i, B_RADIUS]
-        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r + b[i, B_VM]
+        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r
+        if extended:
+            ii += b[i, B_VM]
         rate = b[i, B_BETA]
         dph = s[nq + 3 + i]
         if p[P_ROLL] != 0.0:
             ch = math.cosh(big_r * dph / p[P_UREG])
             rate += b[i, B_MUR] * m * big_r ** 3 * (w + dph) ** 2 / (ch * ch * p[P_UREG])
-        if p[P_DLAW] != 0.0:
-            drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW], b[i, B_KLIN],
-                                            b[i, B_KQUAD], b[i, B_REU], p[P_CD0], p[P_CD1],
-                                            p[P_CD2], p[P_CD3], p[P_CDINF])
-            rate += big_r * big_r * slope
-        if p[P_FRIC] != 0.0:
-            normal = m * big_r * (w + dph) ** 2
-            if p[P_GRAV] != 0.0:
-                normal += m * (p[P_GX] * math.cos(th + s[3 + i])
-                               + p[P_GY] * math.sin(th + s[3 + i]))
-            rate += big_r * big_r * abs(normal) * friction_secant(
-                big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR], p[P_USTR])
+        if extended:
+            if p[P_DLAW] != 0.0:
+                drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW], b[i, B_KLIN],
+                                                b[i, B_KQUAD], b[i, B_REU], p[P_CD0],
+                                                p[P_CD1], p[P_CD2], p[P_CD3], p[P_CDINF])
+                rate += big_r * big_r * slope
+            if p[P_FRIC] != 0.0:
+                normal = m * big_r * (w + dph) ** 2
+                if p[P_GRAV] != 0.0:
+                    normal += m * (p[P_GX] * math.cos(th + s[3 + i])
+                                   + p[P_GY] * math.sin(th + s[3 + i]))
+                rate += big_r * big_r * abs(normal) * friction_secant(
+                    big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR], p[P_USTR])
         lam[nq + 3 + i] = rate / ii
-        if p[P_KC] != 0.0:
-            lam[nq + 3 + i] += _contact.contact_rate(s, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC],
-                                                     p[P_ZC])
+        if extended and p[P_KC] != 0.0:
+            lam[nq + 3 + i] += _contact.contact_rate(s, i, b, B_RADIUS, B_MEFF, big_r,
+                                                     p[P_KC], p[P_ZC])
+
+
+@njit(cache=True)
+def drag_rates_plain(t, s, p, b, d, lam):
+    """:func:`drag_rates` without extended effects (``extended=False``)."""
+    _drag_rates_body(t, s, p, b, d, lam, False)
+
+
+@njit(cache=True)
+def drag_rates_extended(t, s, p, b, d, lam):
+    """:func:`drag_rates` with the extended effects."""
+    _drag_rates_body(t, s, p, b, d, lam, True)
 
 
 @njit(cache=True, inline="always")
@@ -730,24 +596,9 @@ def drag_rates(t, s, p, b, d, lam):
     Every other entry is 0.  This is the stiff, nearly diagonal part of the Jacobian (the
     coupling through the rotor, of relative size m_i / M, is left out); the exponential
     integrator treats it exactly and the step-size rule of the explicit methods bounds h * lam.
-    Scenes without extended effects run the original code; the rest :func:`_drag_rates_ext`.
+    Dispatches like :func:`accelerations`.
     """
-    if p[P_EXT] != 0.0:
-        _drag_rates_ext(t, s, p, b, d, lam)
-        return
-    n = b.shape[0]
-    nq = 3 + n
-    th, w, alpha, torque = drive_state(t, s, d, nq)
-    for j in range(2 * nq):
-        lam[j] = 0.0
-    big_r = p[P_R]
-    for i in range(n):
-        m = b[i, B_MASS]
-        r = b[i, B_RADIUS]
-        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r
-        rate = b[i, B_BETA]
-        if p[P_ROLL] != 0.0:
-            dph = s[nq + 3 + i]
-            ch = math.cosh(big_r * dph / p[P_UREG])
-            rate += b[i, B_MUR] * m * big_r ** 3 * (w + dph) ** 2 / (ch * ch * p[P_UREG])
-        lam[nq + 3 + i] = rate / ii
+    if uses_extended(p, d):
+        drag_rates_extended(t, s, p, b, d, lam)
+    else:
+        _drag_rates_body(t, s, p, b, d, lam, False)

@@ -10,6 +10,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import integrators as integ
+from . import drive_law as dl
 from . import model as mdl
 from .drives import MotorDrive, SpeedProfile
 from .scene import Scene, load_scene
@@ -48,8 +49,8 @@ def stiff_rate(scene: Scene, max_speed: float) -> float:
     """
     p, b = mdl.pack_parameters(scene)
     nq = 3 + scene.ball_count
-    d = np.zeros(mdl.N_DRIVE)
-    d[mdl.D_W0] = max_speed
+    d = np.zeros(dl.N_DRIVE)
+    d[dl.D_W0] = max_speed
     lam = np.zeros(2 * nq)
     mdl.drag_rates(0.0, np.zeros(2 * nq), p, b, d, lam)
     return float(lam.max())
