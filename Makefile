@@ -24,7 +24,7 @@ demo: setup
 	$(PY) -m abb_gym.cli demo --out out/demo
 
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --runwheel
 
 test-slow: setup
 	$(PY) -m pytest -q --runslow

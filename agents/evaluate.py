@@ -88,7 +88,8 @@ def dwell_replay_policy(folder, scene: str, preset: str):
     """The fixed dwell profile a DwellProfile agent chooses, as a RunUpSpeed baseline policy
     (see the module docstring); raises ValueError for an agent that observes the balls."""
     import numpy as np
-    from abb_gym.evaluation.baseline_policies import BaselinePolicy
+    from abb_gym.baselines.baseline_policy import BaselinePolicy
+    from abb_gym.envs.actions import dwell_profile
     from abb_gym.rl import load_policy, make_native_env
 
     pol = load_policy(folder)
@@ -100,7 +101,7 @@ def dwell_replay_policy(folder, scene: str, preset: str):
     acts = pol.predict(obs)
     if not np.allclose(acts, acts[0]):
         raise ValueError("the agent's dwell depends on the observation; no single replay")
-    profile, params = env.unwrapped.setup.dwell_profile(acts[0])
+    profile, params = dwell_profile(env.unwrapped.setup, acts[0])
     env.close()
     name = "ppo-dwell replayed on RunUpSpeed (" + ", ".join(
         f"{k} {v:.4g}" for k, v in params.items() if k != "runup_acceleration") + ")"
@@ -110,7 +111,7 @@ def dwell_replay_policy(folder, scene: str, preset: str):
 def evaluate_agent(agent: str, args) -> dict:
     from abb_gym.evaluation.evaluate import evaluate
     from abb_gym.evaluation.report import summary_table, write_report
-    from abb_gym.rl.policy import resolve_agent_path
+    from abb_gym.rl.agent import resolve_agent_path
     import yaml
 
     folder = resolve_agent_path(agent)
@@ -128,7 +129,7 @@ def evaluate_agent(agent: str, args) -> dict:
     print(f"\n## {folder.name}: {env_id} on {scene}, {args.episodes} test episodes, "
           f"seed {args.seed}\n")
     print(summary_table(results))
-    from abb_gym.envs.core import EnvSetup
+    from abb_gym.envs.setup import EnvSetup
     kind = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
             "abb_gym/DwellProfile-v0": "dwell"}[env_id]
     setup = EnvSetup(kind, scene, args.preset)
@@ -198,7 +199,7 @@ def main(argv=None) -> int:
                    help="baseline families to compare with")
     p.add_argument("--out", default="out/agents", help="report folder")
     args = p.parse_args(argv)
-    from abb_gym.rl.policy import trained_dir
+    from abb_gym.rl.agent import trained_dir
     agents = args.agents or sorted(d.name for d in trained_dir().iterdir()
                                    if (d / "model.zip").exists())
     if not agents:

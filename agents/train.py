@@ -6,12 +6,8 @@
 
 Options: ``python agents/train.py --help``; what a run writes: :mod:`abb_gym.rl.train`.
 """
-import os
 import sys
 
-# before torch and numba load their OpenMP runtimes (see abb_gym/rl/__init__.py)
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 if __name__ == "__main__":
-    from abb_gym.rl.train import main
+    from abb_gym.cli.train import main
     sys.exit(main())

@@ -8,12 +8,15 @@ matplotlib.use("Agg")
 def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", default=False,
                      help="run tests marked slow (training, sweeps)")
+    parser.addoption("--runwheel", action="store_true", default=False,
+                     help="run the wheel test (build, install in a fresh venv elsewhere)")
 
 
 def pytest_collection_modifyitems(config, items):
-    if config.getoption("--runslow"):
-        return
-    skip = pytest.mark.skip(reason="slow: opt in with --runslow (make test-slow)")
+    skip_slow = pytest.mark.skip(reason="slow: opt in with --runslow (make test-slow)")
+    skip_wheel = pytest.mark.skip(reason="wheel: opt in with --runwheel (make test does)")
     for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)
+        if "slow" in item.keywords and not config.getoption("--runslow"):
+            item.add_marker(skip_slow)
+        if "wheel" in item.keywords and not config.getoption("--runwheel"):
+            item.add_marker(skip_wheel)

@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 
 import abb_gym
 from abb_gym.envs import ENV_IDS, PresetError, load_preset
-from abb_gym.envs.core import best_residual, jeffcott_amplitude, reference_amplitudes
+from abb_gym.physics.rotor import reference_amplitudes
 from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics import model as mdl
 from abb_gym.physics.simulate import initial_state
@@ -42,9 +42,12 @@ def rollout(env, actions, seed, options=None):
 @pytest.mark.parametrize("scene", SCENES)
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_check_env_every_id_and_scene(env_id, scene):
+    """check_env with every warning an error, except the allowed ones: check_env renders each
+    of the environment's render modes, and "human" without a display warns so (by design)."""
     env = gym.make(env_id, scene=scene)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the human-mode render warns that there is no display
+        warnings.simplefilter("error")
+        warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
         check_env(env.unwrapped)
     env.close()
 
@@ -175,22 +178,8 @@ def test_truncation_at_episode_length():
     assert info["reward_terms"]["residual"] == pytest.approx(-bound)
 
 
-def test_reference_amplitudes_are_jeffcott():
-    sc = abb_gym.load_scene("yoshida_odd")
-    peak, at_op = reference_amplitudes(sc, 240.0, sc.imbalance)
-    w = np.linspace(1.0, 240.0, 200001)
-    a = [jeffcott_amplitude(sc.imbalance, sc.rotor_mass, 1000.0, 0.2, v) for v in w]
-    assert peak == pytest.approx(max(a), rel=1e-6)
-    undamped = sc.imbalance * 240.0 ** 2 / abs(1000.0 - sc.rotor_mass * 240.0 ** 2)
-    assert at_op == pytest.approx(undamped, rel=1e-3)
-    # below the critical speed the peak is the operating-speed value
-    low = reference_amplitudes(sc, 50.0, sc.imbalance)
-    assert low[0] == low[1]
-
-
 def test_balanced_flag():
     sc = abb_gym.load_scene("yoshida_odd")
-    assert best_residual(sc) == 0.0
     # two equal balls cancel U0 at angles pi +- delta with 2 m R cos(delta) = U0
     delta = math.acos(sc.imbalance / (2 * sc.ball_mass[0] * sc.race_radius))
     env = make(preset="nominal")
@@ -242,7 +231,9 @@ def test_overspeed_trips_the_torque_drive():
 
 def test_numerical_failure_ends_episode_with_finite_observation():
     # a step far beyond RK4's stability limit, and a housing wide enough not to stop it first
-    scene = abb_gym.load_scene("yoshida_odd", housing_clearance=1e30)
+    # (wider than validation allows: set behind its back to reach the kernel's failure path)
+    scene = abb_gym.load_scene("yoshida_odd")
+    object.__setattr__(scene, "housing_clearance", 1e30)
     env = make(preset="nominal", scene=scene, integration_step=0.01)
     env.reset(seed=0)
     for k in range(500):

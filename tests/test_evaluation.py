@@ -9,8 +9,10 @@ import pytest
 from abb_gym import simulate
 from abb_gym.baselines import profiles, tuner
 from abb_gym.cli import main
-from abb_gym.evaluation.baseline_policies import dwell_action, make_baseline
-from abb_gym.evaluation.evaluate import _wilson, evaluate, summarise
+from abb_gym.baselines.baseline_policy import make_baseline
+from abb_gym.envs.actions import dwell_action, dwell_profile
+from abb_gym.evaluation.evaluate import evaluate, summarise
+from abb_gym.evaluation.statistics import share_ci
 from abb_gym.evaluation.report import pareto_front, write_report
 
 SPEED = "abb_gym/RunUpSpeed-v0"
@@ -60,7 +62,7 @@ def test_dwell_action_encodes_the_profile():
     prof = profiles.build("accel_dwell", setup.scene, dwell_speed=110.0, dwell_time=0.4,
                           dwell_accel=10.0)
     a = dwell_action(setup, prof)
-    back, params = setup.dwell_profile(a)
+    back, params = dwell_profile(setup, a)
     assert params["dwell_speed"] == pytest.approx(110.0)
     assert params["dwell_time"] == pytest.approx(0.4)
     assert params["dwell_acceleration"] == pytest.approx(10.0)
@@ -78,7 +80,7 @@ def test_evaluation_is_deterministic_and_independent_of_chunking():
 
 
 def test_summary_confidence_intervals():
-    p, lo, hi = _wilson(5, 10)
+    p, lo, hi = share_ci(5, 10)
     assert p == 0.5 and lo == pytest.approx(0.2366, abs=1e-3) and hi == pytest.approx(0.7634, abs=1e-3)
     eps = [{"time_to_speed": v, "peak_whirl": v, "residual_vibration": v,
             "ball_settling_time": math.nan, "balanced": v > 1, "nonsynchronous_whirl": False,
@@ -89,6 +91,10 @@ def test_summary_confidence_intervals():
     assert s["residual_vibration"]["ci_high"] == pytest.approx(2.0 + 4.3027 / math.sqrt(3), rel=1e-4)
     assert s["ball_settling_time"]["n"] == 0 and math.isnan(s["ball_settling_time"]["mean"])
     assert s["balanced"]["mean"] == pytest.approx(2 / 3)
+    # a non-negative metric's interval never goes below zero
+    eps = [dict(eps[0], residual_vibration=v) for v in (0.0, 0.0, 3.0)]
+    assert summarise(eps)["residual_vibration"]["ci_low"] == 0.0
+    assert share_ci(0, 10)[1] == 0.0 and share_ci(10, 10)[2] == pytest.approx(1.0)
 
 
 def test_pareto_front():
@@ -98,7 +104,13 @@ def test_pareto_front():
 
 def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
     r = tuner.tune("yoshida_odd", families=("speed_dwell",), n_first=6, n_second=3,
-                   episodes=4, write=False)
+                   episodes=4)
+    assert "path" not in r
+    path = tuner.write_tuned(r, tmp_path / "baselines")
+    assert path == tmp_path / "baselines" / "yoshida_odd.yaml" and path.exists()
+    with pytest.raises(ValueError, match="exists; pass --force"):
+        tuner.write_tuned(r, path)
+    tuner.write_tuned(r, path, force=True)
     fam = r["families"]["speed_dwell"]
     assert fam["mean_return"] >= fam["default_mean_return"]
     rows = tuner.sweep("yoshida_odd", families=("ramp",), n=3, episodes=2)

@@ -75,7 +75,7 @@ def test_bad_scene_values_raise_value_error_naming_the_field(overrides, field):
 
 
 def test_error_message_states_allowed_range():
-    with pytest.raises(SceneError, match=r"'ball_mass' must be > 0 \[kg\]"):
+    with pytest.raises(SceneError, match=r"'ball_mass' must be in \[1e-07, 1000\] \[kg\] \(got -1"):
         load_scene("yoshida_odd", ball_mass=-1.0)
     with pytest.raises(SceneError, match=r"'ball_radius' must be < race_radius"):
         load_scene("yoshida_odd", ball_radius=0.011)

@@ -8,8 +8,8 @@ sub-environment with its own profile and seeded episode), chunked into executor 
   (:data:`SPACES`, in units of the scene's critical speed, Yoshida's dwell time and the default
   run-up acceleration), then a second sample in a box a quarter the size around the best;
   the objective is the mean return on the **training** preset (what the agents optimise).
-  The result goes to ``configs/baselines/<scene>.yaml``, which the evaluation's
-  ``baseline:NAME`` policies then use.
+  The result goes where ``out`` says (:func:`write_tuned`); a ``baselines/<scene>.yaml`` on
+  the search path of :mod:`abb_gym.resources` is what ``baseline:NAME`` policies then use.
 * :func:`sweep` - the same families over the same boxes on the **test** preset, as points
   (mean run-up time, mean residual vibration) for the speed-versus-accuracy chart.
 """
@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from ..evaluation.baseline_policies import BASELINES_DIR, BaselinePolicy
+from .baseline_policy import BaselinePolicy
 from ..evaluation.evaluate import Chunk, run_chunk
 from . import profiles
 
@@ -123,8 +123,9 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
 
 def tune(scene_name: str, families=tuple(SPACES), n_first: int = 24, n_second: int = 16,
          episodes: int = 24, seed: int = 20_000, preset: str = "train", executor=None,
-         write: bool = True) -> dict[str, Any]:
-    """Tune each family (see the module docstring); returns and optionally writes the YAML."""
+         out: str | Path | None = None, force: bool = False) -> dict[str, Any]:
+    """Tune each family (see the module docstring); returns the result and, with ``out``,
+    writes it there (:func:`write_tuned`)."""
     from ..physics.scene import load_scene
     scene = load_scene(scene_name)
     rng = np.random.default_rng(seed)
@@ -155,14 +156,32 @@ def tune(scene_name: str, families=tuple(SPACES), n_first: int = 24, n_second: i
             "mean_residual_vibration": round(best["residual_vibration"], 5),
             "candidates": 1 + n_first + n_second,
         }
-    if write:
-        BASELINES_DIR.mkdir(parents=True, exist_ok=True)
-        path = BASELINES_DIR / f"{scene_name}.yaml"
-        header = ("# Tuned baseline parameters (abb-gym tune-baselines); SI units, rad/s, s,\n"
-                  "# rad/s^2.  Tuned on the training preset; evaluate on the test preset.\n")
-        path.write_text(header + yaml.safe_dump(result, sort_keys=False))
-        result["path"] = str(path)
+    if out is not None:
+        result["path"] = str(write_tuned(result, out, force=force))
     return result
+
+
+def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -> Path:
+    """Write a tuning result to ``path`` (a ``.yaml`` file, or a folder that gets
+    ``<scene>.yaml``).  An existing file
+    is replaced only with ``force``; the installed package's shipped files never are."""
+    from .. import resources
+    path = Path(path)
+    if path.suffix not in (".yaml", ".yml"):  # a folder
+        path = path / f"{result['scene']}.yaml"
+    if resources.is_shipped(path) and "site-packages" in path.resolve().parts:
+        raise ValueError(f"{str(path)!r} belongs to the installed abb-gym package; write the "
+                         f"tuned parameters to your own folder and add it with --configs or "
+                         f"${resources.ENV_VAR}")
+    if path.exists() and not force:
+        raise ValueError(f"{str(path)!r} exists; pass --force to replace it")
+    if path.parent.exists() and not path.parent.is_dir():
+        raise ValueError(f"cannot write {str(path)!r}: {str(path.parent)!r} is a file")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = ("# Tuned baseline parameters (abb-gym tune-baselines); SI units, rad/s, s,\n"
+              "# rad/s^2.  Tuned on the training preset; evaluate on the test preset.\n")
+    path.write_text(header + yaml.safe_dump(result, sort_keys=False))
+    return path
 
 
 def sweep(scene_name: str, families=tuple(SPACES), n: int = 12, episodes: int = 12,

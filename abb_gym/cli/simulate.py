@@ -7,7 +7,6 @@ import json
 import sys
 
 import numpy as np
-import yaml
 
 from ..physics import MotorDrive, SpeedProfile, load_scene, simulate
 from ..tables import markdown_table
@@ -15,13 +14,8 @@ from ..tables import markdown_table
 
 def parse_overrides(items: list[str] | None) -> dict:
     """``FIELD=VALUE`` strings -> dict (values parsed as YAML: numbers, lists)."""
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise ValueError(f"--set expects FIELD=VALUE (got {item!r})")
-        key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
-    return out
+    from ..configuration import parse_assignments
+    return parse_assignments(items, "--set")
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:

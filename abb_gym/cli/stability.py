@@ -26,16 +26,6 @@ from ..execution.cli import add_executor_arguments, executor_from_args
 __all__ = ["register", "run"]
 
 
-def _setting(text: str) -> tuple[str, float]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--set needs name=value (got {text!r})")
-    k, v = text.split("=", 1)
-    try:
-        return k.strip(), float(v)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--set {k}: value must be a number (got {v!r})") from None
-
-
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "stability-map", help="stability map of the balanced state over two parameters",
@@ -44,7 +34,7 @@ def register(subparsers) -> None:
                    help="scene name or YAML path (default: dimensionless groups)")
     p.add_argument("--length-scale", type=float, default=None,
                    help="Lu & Hung's e [m] for a scene (default: its rotor_eccentricity)")
-    p.add_argument("--set", type=_setting, action="append", default=[], metavar="NAME=VALUE",
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="fix a group or scene field (repeatable), e.g. --set eta=0.4")
     p.add_argument("--x", default="zeta", help="x-axis parameter (default zeta)")
     p.add_argument("--x-range", type=float, nargs=2, default=(0.02, 0.3), metavar=("LO", "HI"))
@@ -73,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
         if n < 1:
             raise ValueError(f"{label} must be >= 1 (got {n})")
     executor = executor_from_args(args, progress=not args.no_progress)
-    settings = dict(args.set)
+    from ..configuration import parse_assignments
+    settings = parse_assignments(args.set, "--set")
     group_keys = set(GROUP_FIELDS) | {"eta_total"}
     if args.scene is not None:
         scene_set = {k: v for k, v in settings.items() if k not in group_keys}

@@ -15,6 +15,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+from ..execution.cli import add_executor_arguments, executor_from_args
 
 
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,16 +54,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", "-v", type=int, default=0, choices=[0, 1, 2],
                    help="SB3 verbosity (1 prints the training table and each evaluation)")
-    g = p.add_argument_group("multi-seed on Ray (abb_gym.execution.tune; needs "
-                             "abb-gym[cluster])")
-    g.add_argument("--ray", action="store_true",
-                   help="with --seeds: run the seeds as Ray Tune trials")
-    g.add_argument("--ray-address", default=None, metavar="ADDRESS",
-                   help="with --seeds: an existing Ray cluster (auto, HOST:6379, "
-                        "ray://HOST:10001); implies --ray")
-    g.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="with --ray: trainings at once (default: as many as the cluster's "
-                        "CPUs allow at 2 CPUs per trial)")
+    # with --seeds: --ray / --ray-address run the seeds as Ray Tune trials
+    # (abb_gym.execution.tune; needs abb-gym[cluster]); --workers caps the trials at once
+    add_executor_arguments(p, resume=False)
 
 
 def register(sub) -> None:
@@ -67,12 +66,91 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def config_from_args(args: argparse.Namespace):
+    """The TrainConfig the options describe: the file, then the overrides."""
+    from ..configuration import parse_assignments
+    from ..rl.config import load_config
+    cfg = load_config(args.config, args.env)
+    changes: dict[str, Any] = parse_assignments(args.hyperparams, "--hyperparams")
+    for key in ("n_envs", "eval_freq", "eval_episodes", "checkpoint_freq"):
+        if getattr(args, key) is not None:
+            changes[key] = getattr(args, key)
+    if args.n_timesteps is not None:
+        changes["n_timesteps"] = args.n_timesteps
+    env_kw = parse_assignments(args.env_kwargs, "--env-kwargs")
+    if env_kw:
+        changes["env_kwargs"] = env_kw
+    return cfg.with_overrides(**changes) if changes else cfg
+
+
+def _report(res) -> None:
+    print(f"run folder: {res.run_dir}")
+    print(f"wall time {res.wall_time_s:.1f} s, {res.env_steps} env steps, "
+          f"{res.env_steps_per_s:.0f} env-steps/s (evaluations included)")
+    s = res.evaluation
+    if s:
+        def fmt(key: str, digits: int = 3) -> str:
+            m = s[key]
+            return (f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, "
+                    f"{m['ci_high']:.{digits}f}]")
+        print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
+              f"residual vibration {fmt('residual_vibration')} W_r/e, time to speed "
+              f"{fmt('time_to_speed', 2)} s, balanced {fmt('balanced', 2)}")
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    from ..rl.train import default_run_dir, seeded_trial, train
+    cfg = config_from_args(args)
+    if args.seeds is None:
+        res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
+                    verbose=args.verbose)
+        _report(res)
+        return 0
+    seeds = list(dict.fromkeys(args.seeds))
+    root = Path(args.out) if args.out else default_run_dir(cfg, 0).parent / time.strftime(
+        "seeds-%Y%m%d-%H%M%S")
+    if args.ray or args.ray_address:
+        from ..execution.tune import grid, run_trials
+        space = {"env_id": cfg.env_id, "hyperparams": cfg.to_mapping(),
+                 "settings": cfg.abb_gym_settings(), "source": cfg.source,
+                 "seed": grid(seeds), "run_dir": str(root)}
+        trials = run_trials(seeded_trial, space,
+                            executor=executor_from_args(args, ray=True, progress=False),
+                            metric="return", mode="max", resources_per_trial={"cpu": 2},
+                            name="abb_gym_ppo")
+        for t in trials:
+            print(f"seed {t.config['seed']}: {t.metrics}")
+        return 0
+    if args.workers not in (None, 1):
+        raise ValueError("--workers applies to --ray runs; local seeds train one after the "
+                         "other (each run already uses the machine's cores)")
+    for s in seeds:
+        res = train(cfg, seed=s, run_dir=root / f"s{s}", progress=not args.no_progress,
+                    verbose=args.verbose)
+        _report(res)
+    return 0
+
+
+
+
 def run(args: argparse.Namespace) -> int:
     # before torch and the first parallel environment step load their OpenMP runtimes
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
-        from ..rl.train import run_from_args
+        import abb_gym.rl.train  # noqa: F401  (fails early without the training extra)
     except ImportError as exc:
         raise ValueError(f"training needs the training extra: pip install -c constraints.txt "
                          f"'abb-gym[train]' ({exc})") from None
     return run_from_args(args)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``agents/train.py``: the options of ``abb-gym train`` as a script."""
+    p = argparse.ArgumentParser(prog="train", description=__doc__.split("\n")[0])
+    add_train_arguments(p)
+    args = p.parse_args(argv)
+    try:
+        return run(args)
+    except ValueError as exc:
+        print(f"train: error: {exc}", file=sys.stderr)
+        return 2

@@ -1,7 +1,16 @@
-"""``abb-gym tune-baselines``: tune the dwell and speed-reduction baselines of a scene on the
-training distribution and store them in configs/baselines/<scene>.yaml (used afterwards by
-every ``baseline:NAME`` policy)."""
+"""``abb-gym tune-baselines``: tune the baseline families of a scene on the training
+distribution and write them to ``--out`` (default ``baselines/<scene>.yaml`` in the current
+folder).  ``baseline:NAME`` policies use a ``baselines/<scene>.yaml`` of a configuration folder
+(``--configs DIR`` or ``$ABB_GYM_CONFIGS``) before the shipped one, so::
+
+    abb-gym tune-baselines --scene yoshida_odd --out my_configs/baselines
+    abb-gym evaluate --configs my_configs --scene yoshida_odd --policy baseline:speed_dwell
+
+An existing file is replaced only with ``--force``.
+"""
 from __future__ import annotations
+
+from pathlib import Path
 
 from ..execution.cli import add_executor_arguments
 from .evaluate import _executor
@@ -19,6 +28,9 @@ def register(sub) -> None:
     p.add_argument("--episodes", type=int, default=24, help="training episodes per candidate")
     p.add_argument("--seed", type=int, default=20_000)
     p.add_argument("--preset", default="train")
+    p.add_argument("--out", default=None,
+                   help="file or folder to write (default: baselines/<scene>.yaml here)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--dry-run", action="store_true", help="print, do not write the YAML")
     add_executor_arguments(p)
     p.set_defaults(func=run)
@@ -30,8 +42,11 @@ def run(args) -> int:
     for name in ("candidates", "refine", "episodes"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1 (got {getattr(args, name)})")
+    out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
+    if out is not None and Path(out).exists() and not Path(out).is_dir() and not args.force:
+        raise ValueError(f"{out!r} exists; pass --force to replace it")
     result = tune(args.scene, tuple(args.family or SPACES), args.candidates, args.refine,
-                  args.episodes, args.seed, args.preset, _executor(args),
-                  write=not args.dry_run)
+                  args.episodes, args.seed, args.preset, _executor(args), out=out,
+                  force=args.force)
     print(yaml.safe_dump(result, sort_keys=False))
     return 0

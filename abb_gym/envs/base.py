@@ -2,8 +2,9 @@
 
 The three environments differ only in their action (see :mod:`abb_gym.envs.torque`,
 :mod:`abb_gym.envs.speed`, :mod:`abb_gym.envs.dwell`); everything below is shared.  The
-physics is the compiled model of :mod:`abb_gym.physics.model`, advanced by the production RK4
-(:func:`abb_gym.physics.batch.advance`, bit-compatible with ``simulate(method="rk4")``).
+physics is the compiled model of :mod:`abb_gym.physics.model`, advanced by the compiled step
+of :mod:`abb_gym.envs.kernel` (bit-compatible with ``simulate`` using the same integrator);
+what an action means is :mod:`abb_gym.envs.actions`.
 """
 from __future__ import annotations
 
@@ -14,11 +15,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import logger
 
-from . import core
-from .core import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_BAL, O_EFFORT, O_FAIL, O_FCODE,
-                   O_IMB, O_R, O_RDYN, O_RESID, O_REWARD, O_TERM, O_TIME, O_TRUNC, O_VIB, S_K,
-                   S_NSETTLE, S_PEAK, S_REACHED, S_T_REACH, Buffers, EnvSetup)
+from . import kernel
+from .actions import ActionModel, as_action_array
+from .info import step_info
+from .layout import ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
+from .setup import Buffers, EnvSetup, Episode, SetupAccess
 
 COMMON_DOC = textwrap.dedent(r"""
     ## Observation Space
@@ -139,7 +141,7 @@ COMMON_DOC = textwrap.dedent(r"""
 __doc__ += COMMON_DOC
 
 
-class BalancerEnv(gym.Env):
+class BalancerEnv(SetupAccess, gym.Env):
     """Common implementation; use the registered subclasses."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
@@ -161,7 +163,7 @@ class BalancerEnv(gym.Env):
                              render_fps=max(1, round(1.0 / self.setup.control_interval)))
         self._bufs = Buffers(self.setup, 1, n_trace=1 if render_mode else 0)
         self._renderer: Renderer | None = None
-        self._episode: core.Episode | None = None
+        self._episode: Episode | None = None
         self._done = False
         self._warned_clip = False
         self._warned_done = False
@@ -196,22 +198,12 @@ class BalancerEnv(gym.Env):
         self._bind()
 
     @property
-    def scene(self):
-        """The environment's nominal scene (episodes may randomise it: ``episode_scene``)."""
-        return self.setup.scene
-
-    @property
-    def config(self):
-        """The resolved preset (:class:`abb_gym.envs.config.EnvConfig`)."""
-        return self.setup.config
-
-    @property
     def episode_scene(self):
         """The current episode as a Scene (randomised imbalance, drag, rolling resistance)."""
         return None if self._episode is None else self._episode.scene
 
     @property
-    def episode(self) -> core.Episode | None:
+    def episode(self) -> Episode | None:
         """The current episode's parameters."""
         return self._episode
 
@@ -246,13 +238,6 @@ class BalancerEnv(gym.Env):
             self.render()
         return self._obs_row.copy(), info
 
-    def _write_action(self, action) -> None:
-        try:
-            self._act_row[:] = action
-        except (ValueError, TypeError):
-            raise ValueError(f"action must be an array of shape {self.action_space.shape} in "
-                             f"[-1, 1] (got {action!r})") from None
-
     def step(self, action):
         if self._episode is None:
             raise gym.error.ResetNeeded("call reset() before step()")
@@ -260,57 +245,49 @@ class BalancerEnv(gym.Env):
             logger.warn("step() called after the episode ended (terminated or truncated); "
                         "it returns the last observation with reward 0 - call reset()")
             self._warned_done = True
-        self._write_action(action)
-        core.step_serial(*self._args)
-        out = self._out_row.tolist()
+        a = as_action_array(action, self.action_space.shape)
+        extra = None
+        if not self._done and self.setup.actions.before_step is not ActionModel.before_step:
+            self._check_finite(a, action)
+            clipped = np.clip(a, -1.0, 1.0)
+            if np.any(clipped != a):
+                self._warn_clipped(action)
+            a = clipped
+            extra = self.setup.actions.before_step(self.setup, self._bufs, 0, a, self._episode)
+            if extra:
+                self.last_profile = extra.pop("profile", None)
+        self._act_row[:] = a
+        kernel.step_serial(*self._args)
+        out = self._out_row
         flag = out[O_ACTFLAG]
-        if flag:
-            self._action_flag(flag, out, action)
-        terminated = out[O_TERM] != 0.0
-        truncated = out[O_TRUNC] != 0.0
+        if flag == ACT_NONFINITE:
+            self._check_finite(a, action)
+        if flag == ACT_CLIPPED:
+            self._warn_clipped(action)
+        terminated = bool(out[O_TERM] != 0.0)
+        truncated = bool(out[O_TRUNC] != 0.0)
         self._done = terminated or truncated
-        info = self._info(out)
+        info = self._info()
+        if extra:
+            info.update(extra)
         if self.render_mode == "human":
             self.render()
-        return self._obs_row.copy(), out[O_REWARD], terminated, truncated, info
+        return self._obs_row.copy(), float(out[O_REWARD]), terminated, truncated, info
 
-    def _action_flag(self, flag: float, out: list, action) -> None:
-        if flag == ACT_NONFINITE:
-            raise ValueError(f"action must be finite; entry {int(out[core.O_FINDEX])} of "
-                             f"{action!r} is not (the step was not taken)")
-        if flag == ACT_CLIPPED and not self._warned_clip:
+    @staticmethod
+    def _check_finite(a: np.ndarray, action) -> None:
+        if not np.all(np.isfinite(a)):
+            bad = int(np.argmax(~np.isfinite(a)))
+            raise ValueError(f"action must be finite; entry {bad} of {action!r} is not (the "
+                             f"step was not taken)")
+
+    def _warn_clipped(self, action) -> None:
+        if not self._warned_clip:
             logger.warn(f"action {action!r} outside [-1, 1] was clipped (warned once)")
             self._warned_clip = True
 
-    def _info(self, out: list | None = None) -> dict[str, Any]:
-        if out is None:
-            out = self._out_row.tolist()
-        st = self._st_row.tolist()
-        s = self._s_row
-        nq = self._nq
-        r = out[O_R]
-        info = {
-            "reward_terms": {"vibration": out[O_VIB], "time": out[O_TIME],
-                             "effort": out[O_EFFORT], "residual": out[O_RESID],
-                             "failure": out[O_FAIL]},
-            "time": st[S_K] * self._dt,
-            "rotor_speed": float(s[nq + 2]),
-            "whirl_radius": r,
-            "whirl_ratio": r / self._ref_len,
-            "vibration_radius": out[O_RDYN],
-            "peak_whirl_radius": st[S_PEAK],
-            "ball_angles": s[3:nq].copy(),
-            "run_up_finished": st[S_REACHED] != 0.0,
-            "time_to_speed": st[S_T_REACH],
-            "time_at_speed": st[S_NSETTLE] * self._dt,
-            "balanced": out[O_BAL] != 0.0,
-            "residual_imbalance_ratio": out[O_IMB],
-        }
-        code = int(out[O_FCODE])
-        if code:
-            info["failure"] = self.setup.failure_message(code, self._out_row, self._st_row,
-                                                         self._s_row)
-        return info
+    def _info(self) -> dict[str, Any]:
+        return step_info(self.setup, self._out_row, self._st_row, self._s_row, self._ref_len)
 
     def render(self):
         if self.render_mode is None:

@@ -12,50 +12,10 @@ test       evaluation; wider ranges, imbalance up to 1.3 x the balancing capacit
 nominal    no randomisation: the scene exactly as loaded (reproduces ``simulate``)
 =========  ================================================================================
 
-Fields (unit, allowed range; ``null`` where a scene-derived default exists):
+Fields (declared once on :class:`EnvConfig` and its sections; ``null`` where a
+scene-derived default exists):
 
-=========================  ========  =====================================================
-field                      unit      meaning
-=========================  ========  =====================================================
-operating_speed            rad/s     target speed; null = the scene's
-                                     ``drive_operating_speed``; > 0
-control_interval           s         time between agent decisions; > 0 (default 0.01)
-episode_length             s         time limit (truncation); null = automatic (see the
-                                     environment docstrings); > control_interval
-settle_time                s         time at operating speed that completes an episode,
-                                     >= 0
-at_speed_tolerance         -         "at operating speed" means |w - w_op| <= tol w_op,
-                                     in (0, 0.5]
-overspeed                  -         RunUpTorque trips (terminates with the failure
-                                     penalty) when |w| > overspeed w_op; > 1
-vibration_filter_time      s         time constant of the filtered vibration amplitude in
-                                     the observation; > 0
-balance_tolerance          -         residual imbalance (relative to the imbalance) within
-                                     which ``info["balanced"]`` is true; > 0
-integrator                 -         compiled fixed-step method: "rk4" or "etdrk4"
-                                     (exact stiff ball drag, larger steps at the same
-                                     accuracy); both agree with ``simulate`` using it
-integration_step           s         step bound; null = ``default_step`` of each episode's
-                                     scene for the integrator; > 0
-reward.vibration           -         weight of the vibration term, >= 0
-reward.time                -         weight of the time-to-speed term, >= 0
-reward.effort              -         weight of the control-effort term, >= 0
-reward.residual            -         weight of the terminal residual-vibration term, >= 0
-reward.failure             -         fixed part of the failure penalty, >= 0
-dwell.runup_acceleration   -         DwellProfile ramp acceleration / drive_max_acceleration,
-                                     in (0, 1]
-dwell.speed_range          -         dwell start speed / lower critical speed, [lo, hi],
-                                     0 <= lo <= hi
-dwell.time_range           -         dwell duration / nominal run-up time, [lo, hi],
-                                     0 <= lo <= hi
-dwell.accel_range          -         dwell acceleration / ramp acceleration, [lo, hi],
-                                     -10 <= lo <= hi <= 10
-randomize.imbalance_ratio  -         imbalance / balancing capacity (sum m_i R); > 0
-randomize.imbalance_phase  rad       angle of the imbalance at t = 0 (fixed frame)
-randomize.ball_angles      rad       each ball's initial angle from the imbalance
-randomize.ball_drag_scale  -         factor on the scene's ball_drag (one per episode), > 0
-randomize.rolling_resistance_scale - factor on the scene's ball_rolling_resistance, >= 0
-=========================  ========  =====================================================
+{table}
 
 A ``randomize`` entry is ``[lo, hi]`` (uniform, drawn from the environment's ``np_random``),
 one number (fixed), or ``null`` (the scene's value).  A preset may name a ``base`` preset whose
@@ -68,78 +28,112 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, fields
-from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
+from .. import resources
+from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
+                             read_yaml, specs)
 
 __all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "load_preset",
-           "list_presets", "presets_dir", "PRESET_FIELDS"]
+           "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS"]
 
 Range = tuple[float, float]
+INTEGRATORS = ("rk4", "etdrk4")
+PI = math.pi
 
 
-class PresetError(ValueError):
+class PresetError(ConfigError):
     """An environment preset or keyword override is invalid (names the field and range)."""
 
 
-def presets_dir() -> Path:
-    """Folder of the environment presets: ``$ABB_GYM_CONFIGS/envs`` or ``configs/envs``."""
-    root = os.environ.get("ABB_GYM_CONFIGS")
-    base = Path(root) if root else Path(__file__).resolve().parents[2] / "configs"
-    return base / "envs"
+def presets_dir():
+    """Folder of the shipped environment presets (``configs/envs``)."""
+    return resources.shipped_folder("envs")
 
 
 def list_presets() -> list[str]:
-    """Names of the shipped environment presets."""
-    return sorted(p.stem for p in presets_dir().glob("*.yaml"))
+    """Names of the environment presets on the search path."""
+    return resources.names("envs")
 
 
 @dataclass(frozen=True)
 class RewardWeights:
-    vibration: float = 1.0
-    time: float = 1.0
-    effort: float = 0.1
-    residual: float = 2.0
-    failure: float = 10.0
+    vibration: float = declare(1.0, ge=0.0, le=1e6, doc="weight of the vibration term")
+    time: float = declare(1.0, ge=0.0, le=1e6, doc="weight of the time-to-speed term")
+    effort: float = declare(0.1, ge=0.0, le=1e6, doc="weight of the control-effort term")
+    residual: float = declare(2.0, ge=0.0, le=1e6,
+                              doc="weight of the terminal residual-vibration term")
+    failure: float = declare(10.0, ge=0.0, le=1e6, doc="fixed part of the failure penalty")
 
 
 @dataclass(frozen=True)
 class DwellRanges:
-    runup_acceleration: float = 0.5
-    speed_range: Range = (0.5, 1.5)
-    time_range: Range = (0.0, 0.25)
-    accel_range: Range = (-1.0, 1.0)
+    runup_acceleration: float = declare(0.5, gt=0.0, le=1.0,
+                                        doc="DwellProfile ramp acceleration / "
+                                            "drive_max_acceleration")
+    speed_range: Range = declare((0.5, 1.5), kind="range", ge=0.0, le=100.0,
+                                 doc="dwell start speed / lower critical speed")
+    time_range: Range = declare((0.0, 0.25), kind="range", ge=0.0, le=100.0,
+                                doc="dwell duration / nominal run-up time")
+    accel_range: Range = declare((-1.0, 1.0), kind="range", ge=-10.0, le=10.0,
+                                 doc="dwell acceleration / ramp acceleration")
 
 
 @dataclass(frozen=True)
 class Randomization:
-    imbalance_ratio: Range | None = None
-    imbalance_phase: Range | None = None
-    ball_angles: Range | None = None
-    ball_drag_scale: Range | None = None
-    rolling_resistance_scale: Range | None = None
+    imbalance_ratio: Range | None = declare(None, kind="range", gt=0.0, le=100.0,
+                                            nullable=True,
+                                            doc="imbalance / balancing capacity (sum m_i R)")
+    imbalance_phase: Range | None = declare(None, kind="range", unit="rad", ge=-2 * PI,
+                                            le=2 * PI, nullable=True,
+                                            doc="angle of the imbalance at t = 0 (fixed frame)")
+    ball_angles: Range | None = declare(None, kind="range", unit="rad", ge=-2 * PI, le=2 * PI,
+                                        nullable=True,
+                                        doc="each ball's initial angle from the imbalance")
+    ball_drag_scale: Range | None = declare(None, kind="range", gt=0.0, le=1e3, nullable=True,
+                                            doc="factor on the scene's ball_drag")
+    rolling_resistance_scale: Range | None = declare(None, kind="range", ge=0.0, le=1e3,
+                                                     nullable=True,
+                                                     doc="factor on the scene's "
+                                                         "ball_rolling_resistance")
+
+
+_SECTIONS = {"reward": RewardWeights, "dwell": DwellRanges, "randomize": Randomization}
 
 
 @dataclass(frozen=True)
 class EnvConfig:
     """A validated environment preset (see the module docstring for every field)."""
 
-    name: str = "custom"
-    description: str = ""
-    operating_speed: float | None = None
-    control_interval: float = 0.01
-    episode_length: float | None = None
-    settle_time: float = 1.0
-    at_speed_tolerance: float = 0.01
-    overspeed: float = 1.2
-    vibration_filter_time: float = 0.05
-    balance_tolerance: float = 0.1
-    integrator: str = "rk4"
-    integration_step: float | None = None
-    reward: RewardWeights = RewardWeights()
-    dwell: DwellRanges = DwellRanges()
-    randomize: Randomization = Randomization()
+    name: str = declare("custom", kind="text", doc="preset name")
+    description: str = declare("", kind="text", doc="what the preset is for")
+    operating_speed: float | None = declare(None, unit="rad/s", gt=0.0, le=1e5, nullable=True,
+                                            doc="target speed; null = the scene's")
+    control_interval: float = declare(0.01, unit="s", ge=1e-5, le=10.0,
+                                      doc="time between agent decisions")
+    episode_length: float | None = declare(None, unit="s", gt=0.0, le=1e5, nullable=True,
+                                           doc="time limit (truncation); null = automatic")
+    settle_time: float = declare(1.0, unit="s", ge=0.0, le=1e4,
+                                 doc="time at operating speed that completes an episode")
+    at_speed_tolerance: float = declare(0.01, gt=0.0, le=0.5,
+                                        doc="at operating speed: |w - w_op| <= tol w_op")
+    overspeed: float = declare(1.2, gt=1.0, le=10.0,
+                               doc="RunUpTorque trips when |w| > overspeed w_op")
+    vibration_filter_time: float = declare(0.05, unit="s", gt=0.0, le=1e3,
+                                           doc="time constant of the filtered vibration "
+                                               "amplitude")
+    balance_tolerance: float = declare(0.1, gt=0.0, le=10.0,
+                                       doc="info['balanced']: residual within tol x U0 of "
+                                           "the best")
+    integrator: str = declare("rk4", kind="choice", choices=INTEGRATORS,
+                              doc="compiled fixed-step method (etdrk4: exact stiff drag)")
+    integration_step: float | None = declare(None, unit="s", ge=1e-7, le=1.0, nullable=True,
+                                             doc="step bound; null = default_step of each "
+                                                 "episode")
+    reward: RewardWeights = declare(RewardWeights(), kind="any", doc="reward weights")
+    dwell: DwellRanges = declare(DwellRanges(), kind="any", doc="DwellProfile action ranges")
+    randomize: Randomization = declare(Randomization(), kind="any",
+                                       doc="per-episode randomisation")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dictionary (YAML/JSON-safe; ranges as lists)."""
@@ -153,75 +147,28 @@ class EnvConfig:
         return out
 
 
-INTEGRATORS = ("rk4", "etdrk4")
-_SECTIONS = {"reward": RewardWeights, "dwell": DwellRanges, "randomize": Randomization}
 PRESET_FIELDS = tuple(f.name for f in fields(EnvConfig))
 
-# scalar fields: (unit, lower, lower inclusive, upper, upper inclusive, nullable)
-_SCALARS: dict[str, tuple[str, float | None, bool, float | None, bool, bool]] = {
-    "operating_speed": ("rad/s", 0.0, False, None, True, True),
-    "control_interval": ("s", 0.0, False, None, True, False),
-    "episode_length": ("s", 0.0, False, None, True, True),
-    "settle_time": ("s", 0.0, True, None, True, False),
-    "at_speed_tolerance": ("-", 0.0, False, 0.5, True, False),
-    "overspeed": ("-", 1.0, False, None, True, False),
-    "vibration_filter_time": ("s", 0.0, False, None, True, False),
-    "balance_tolerance": ("-", 0.0, False, None, True, False),
-    "integration_step": ("s", 0.0, False, None, True, True),
-}
-_RANDOM_BOUNDS: dict[str, tuple[str, float | None, bool]] = {
-    # name: (unit, lower bound, inclusive)
-    "imbalance_ratio": ("-", 0.0, False),
-    "imbalance_phase": ("rad", None, True),
-    "ball_angles": ("rad", None, True),
-    "ball_drag_scale": ("-", 0.0, False),
-    "rolling_resistance_scale": ("-", 0.0, True),
-}
+
+def _doc_rows() -> dict[str, Any]:
+    rows: dict[str, Any] = {}
+    for name, spec in specs(EnvConfig).items():
+        if name in _SECTIONS:
+            rows.update({f"{name}.{key}": sub for key, sub in specs(_SECTIONS[name]).items()})
+        elif name not in ("name", "description"):
+            rows[name] = spec
+    return rows
 
 
-def _bound_text(lo, lo_incl, hi=None, hi_incl=True, unit="-") -> str:
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>=' if lo_incl else '>'} {lo:g}")
-    if hi is not None:
-        parts.append(f"{'<=' if hi_incl else '<'} {hi:g}")
-    return (" and ".join(parts) if parts else "finite") + f" [{unit}]"
-
-
-def _number(where: str, value: Any, lo=None, lo_incl=True, hi=None, hi_incl=True,
-            unit="-") -> float:
-    rng = _bound_text(lo, lo_incl, hi, hi_incl, unit)
-    if isinstance(value, bool):
-        raise PresetError(f"{where} must be a number {rng} (got {value!r})")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise PresetError(f"{where} must be a number {rng} (got {value!r})") from None
-    if not math.isfinite(v) or (lo is not None and (v < lo or (v == lo and not lo_incl))) \
-            or (hi is not None and (v > hi or (v == hi and not hi_incl))):
-        raise PresetError(f"{where} must be {rng} (got {v:g})")
-    return v
-
-
-def _range(where: str, value: Any, lo=None, lo_incl=True, hi=None, hi_incl=True,
-           unit="-") -> Range:
-    if isinstance(value, (list, tuple)):
-        if len(value) != 2:
-            raise PresetError(f"{where} must be [lo, hi] or one number, each "
-                              f"{_bound_text(lo, lo_incl, hi, hi_incl, unit)} (got {value!r})")
-        a = _number(where + "[0]", value[0], lo, lo_incl, hi, hi_incl, unit)
-        b = _number(where + "[1]", value[1], lo, lo_incl, hi, hi_incl, unit)
-        if a > b:
-            raise PresetError(f"{where} must have lo <= hi (got [{a:g}, {b:g}])")
-        return a, b
-    v = _number(where, value, lo, lo_incl, hi, hi_incl, unit)
-    return v, v
+__doc__ = __doc__.replace("{table}", fields_table(_doc_rows()))
 
 
 def _section(name: str, raw: Any, where: str):
     cls = _SECTIONS[name]
     if raw is None:
         raw = {}
+    if isinstance(raw, cls):
+        return raw
     if not isinstance(raw, Mapping):
         raise PresetError(f"{where}: field {name!r} must be a mapping with keys "
                           f"{[f.name for f in fields(cls)]} (got {raw!r})")
@@ -229,25 +176,9 @@ def _section(name: str, raw: Any, where: str):
     unknown = sorted(set(raw) - set(allowed))
     if unknown:
         raise PresetError(f"{where}: unknown key(s) {unknown} in {name!r}; allowed: {allowed}")
-    values: dict[str, Any] = {}
-    for key, v in raw.items():
-        label = f"{where}: field '{name}.{key}'"
-        if name == "reward":
-            values[key] = _number(label, v, 0.0, True)
-        elif name == "dwell":
-            if key == "runup_acceleration":
-                values[key] = _number(label, v, 0.0, False, 1.0, True)
-            elif key == "accel_range":
-                values[key] = _range(label, v, -10.0, True, 10.0, True)
-            else:
-                values[key] = _range(label, v, 0.0, True)
-        else:
-            if v is None:
-                values[key] = None
-            else:
-                unit, lo, incl = _RANDOM_BOUNDS[key]
-                values[key] = _range(label, v, lo, incl, unit=unit)
-    return values
+    table = specs(cls)
+    return cls(**{key: check(where, f"{name}.{key}", v, table[key], PresetError)
+                  for key, v in raw.items()})
 
 
 def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
@@ -261,22 +192,8 @@ def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _read_preset(name_or_path: str | os.PathLike, seen: tuple[str, ...] = ()) -> dict[str, Any]:
-    text = str(name_or_path)
-    path = Path(text)
-    if not (text.endswith((".yaml", ".yml")) or path.exists()):
-        path = presets_dir() / f"{text}.yaml"
-        if not path.exists():
-            raise PresetError(f"unknown environment preset {text!r}; available: "
-                              f"{', '.join(list_presets())} (or give a path to a YAML file)")
-    if not path.exists():
-        raise PresetError(f"preset file {str(path)!r} does not exist")
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise PresetError(f"preset file {str(path)!r} is not valid YAML: {exc}") from None
-    if not isinstance(raw, Mapping):
-        raise PresetError(f"preset file {str(path)!r} must hold a mapping of fields")
-    raw = dict(raw)
+    path = locate("envs", name_or_path, "environment preset", PresetError)
+    raw = dict(read_yaml(path, "preset", PresetError))
     raw.setdefault("name", path.stem)
     base = raw.pop("base", None)
     if base is not None:
@@ -300,8 +217,11 @@ def load_preset(preset: str | os.PathLike | Mapping[str, Any] | EnvConfig = "tra
         if base is not None:
             parent = _read_preset(base)
             raw = _merge(parent, raw)
-    else:
+    elif isinstance(preset, (str, os.PathLike)):
         raw = _read_preset(preset)
+    else:
+        raise PresetError(f"preset must be a name, a path, a mapping or an EnvConfig (got "
+                          f"{preset!r}); available: {', '.join(list_presets())}")
     raw = _merge(raw, overrides)
     where = f"environment preset {raw.get('name', 'custom')!r}"
     unknown = sorted(set(raw) - set(PRESET_FIELDS))
@@ -309,29 +229,12 @@ def load_preset(preset: str | os.PathLike | Mapping[str, Any] | EnvConfig = "tra
         raise PresetError(f"{where}: unknown field(s) {unknown}; allowed: {list(PRESET_FIELDS)}"
                           f" (plus the environment keywords scene, preset, observe_balls, "
                           f"render_mode, max_episode_steps)")
-    kwargs: dict[str, Any] = {}
-    for key, v in raw.items():
-        if key in ("name", "description"):
-            kwargs[key] = str(v) if v is not None else ""
-        elif key == "integrator":
-            if v not in INTEGRATORS:
-                raise PresetError(f"{where}: field 'integrator' must be one of {INTEGRATORS} "
-                                  f"(got {v!r})")
-            kwargs[key] = v
-        elif key in _SECTIONS:
-            kwargs[key] = _SECTIONS[key](**_section(key, v, where))
-        else:
-            unit, lo, lo_incl, hi, hi_incl, nullable = _SCALARS[key]
-            if v is None:
-                if not nullable:
-                    raise PresetError(f"{where}: field {key!r} must be a number "
-                                      f"{_bound_text(lo, lo_incl, hi, hi_incl, unit)} "
-                                      f"(got None)")
-                kwargs[key] = None
-            else:
-                kwargs[key] = _number(f"{where}: field {key!r}", v, lo, lo_incl, hi, hi_incl,
-                                      unit)
-    cfg = EnvConfig(**kwargs)
+    values = {k: (_section(k, v, where) if k in _SECTIONS else v) for k, v in raw.items()}
+    if values.get("name") is None:
+        values["name"] = "custom"
+    if values.get("description") is None:
+        values["description"] = ""
+    cfg = build(EnvConfig, values, where, PresetError)
     if cfg.episode_length is not None and cfg.episode_length <= cfg.control_interval:
         raise PresetError(f"{where}: field 'episode_length' must be > control_interval = "
                           f"{cfg.control_interval:g} s (got {cfg.episode_length:g} s)")

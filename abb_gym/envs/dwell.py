@@ -44,10 +44,6 @@ would make gymnasium's TimeLimit report every episode as truncated).
 """
 from __future__ import annotations
 
-import numpy as np
-from gymnasium import logger
-
-from . import core
 from .base import COMMON_DOC, BalancerEnv
 
 __all__ = ["DwellProfileEnv"]
@@ -55,37 +51,6 @@ __all__ = ["DwellProfileEnv"]
 
 class DwellProfileEnv(BalancerEnv):
     kind = "dwell"
-
-    def _write_action(self, action) -> None:
-        try:
-            a = np.asarray(action, dtype=float)
-        except (TypeError, ValueError):
-            a = None
-        if a is None or a.shape != self.action_space.shape:
-            raise ValueError(f"action must be an array of shape {self.action_space.shape} in "
-                             f"[-1, 1] (got {action!r})")
-        if not np.all(np.isfinite(a)):
-            bad = int(np.argmax(~np.isfinite(a)))
-            raise ValueError(f"action must be finite; entry {bad} of {action!r} is not (the "
-                             f"step was not taken)")
-        clipped = np.clip(a, -1.0, 1.0)
-        if np.any(clipped != a) and not self._warned_clip:
-            logger.warn(f"action {action!r} outside [-1, 1] was clipped (warned once)")
-            self._warned_clip = True
-        if self._done:
-            self._act_row[:] = clipped
-            return
-        profile, params = self.setup.dwell_profile(clipped, self._episode.imbalance_phase)
-        self.setup.write_dwell_rows(self._bufs, 0, profile)
-        self._act_row[:] = clipped
-        self.last_profile = profile
-        self._dwell_params = params
-
-    def _info(self, out=None):
-        info = super()._info(out)
-        if out is not None and self.last_profile is not None:
-            info["dwell"] = dict(self._dwell_params)
-        return info
 
 
 DwellProfileEnv.__doc__ = __doc__ + COMMON_DOC

@@ -3,7 +3,7 @@
 ``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` returns one of
 these.  All sub-environments share the scene, the preset and the action type; each has its
 own episode parameters, random generator and state.  One ``step`` runs
-:func:`abb_gym.envs.core.step_parallel`, which advances every sub-environment with the same
+:func:`abb_gym.envs.kernel.step_parallel`, which advances every sub-environment with the same
 compiled per-environment function as the single environment (``numba.prange`` over
 environments, one thread pool launch per step), so sub-environment ``i`` and a single
 environment reset with the same seed follow the same trajectory bit for bit.
@@ -57,11 +57,12 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from . import core
-from .core import (O_BAL, O_EFFORT, O_FAIL, O_FCODE, O_IMB, O_R, O_RDYN, O_RESID, O_REWARD,
-                   O_TERM, O_TIME, O_TRUNC, O_VIB, S_K, S_NSETTLE, S_PEAK, S_REACHED,
-                   S_T_REACH, Buffers, EnvSetup)
+from . import kernel
+from .actions import ActionModel, as_action_array
+from .info import episode_info, masked, step_info
+from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
+from .setup import Buffers, EnvSetup, Episode, SetupAccess
 
 __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
            "DwellProfileVectorEnv"]
@@ -69,7 +70,7 @@ __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
 MAX_RENDERED = 4
 
 
-class BalancerVectorEnv(VectorEnv):
+class BalancerVectorEnv(SetupAccess, VectorEnv):
     """Native vector environment; use the registered subclasses (see the module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25,
@@ -96,7 +97,7 @@ class BalancerVectorEnv(VectorEnv):
         n_trace = min(self.num_envs, MAX_RENDERED) if render_mode else 0
         self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace)
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
-        self._episodes: list[core.Episode | None] = [None] * self.num_envs
+        self._episodes: list[Episode | None] = [None] * self.num_envs
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
         self._started = False
         self._warned_clip = False
@@ -110,14 +111,6 @@ class BalancerVectorEnv(VectorEnv):
         state = self.__dict__.copy()
         state["_renderers"] = None
         return state
-
-    @property
-    def scene(self):
-        return self.setup.scene
-
-    @property
-    def config(self):
-        return self.setup.config
 
     def episode_scene(self, i: int):
         """Sub-environment ``i``'s current episode as a Scene."""
@@ -198,17 +191,7 @@ class BalancerVectorEnv(VectorEnv):
             raise gym.error.ResetNeeded("call reset() before step()")
         bf = self._bufs
         n = self.num_envs
-        shape = (n,) + self.single_action_space.shape
-        try:
-            a = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"actions must be an array of shape {shape} (got {actions!r})"
-                             ) from None
-        if a.shape != shape:
-            if a.size != n * self.setup.n_actions:
-                raise ValueError(f"actions must be an array of shape {shape} (got shape "
-                                 f"{a.shape})")
-            a = a.reshape(shape)
+        a = as_action_array(actions, (n,) + self.single_action_space.shape, "actions")
         finite = np.isfinite(a)
         if not finite.all():
             bad = np.argwhere(~finite)[0]
@@ -223,16 +206,12 @@ class BalancerVectorEnv(VectorEnv):
                 self._reset_row(int(i), None)
             bf.active[:] = 1
             bf.active[rows] = 0
-        bf.act[:] = a.reshape(n, -1)
-        if self.kind == "dwell":
-            clipped = np.clip(bf.act, -1.0, 1.0)
-            bf.act[:] = clipped
-            for i in range(n):
-                if bf.active[i]:
-                    profile, _ = self.setup.dwell_profile(clipped[i],
-                                                          self._episodes[i].imbalance_phase)
-                    self.setup.write_dwell_rows(bf, i, profile)
-        core.step_parallel(*bf.kernel_args())
+        bf.act[:] = np.clip(a, -1.0, 1.0)
+        am = self.setup.actions
+        if am.before_step is not ActionModel.before_step:
+            for i in np.flatnonzero(bf.active):
+                am.before_step(self.setup, bf, int(i), bf.act[i], self._episodes[i])
+        kernel.step_parallel(*bf.kernel_args())
         if rows.size:
             bf.observe(rows)
             bf.active[:] = 1
@@ -247,61 +226,11 @@ class BalancerVectorEnv(VectorEnv):
 
     def _info(self, mask: np.ndarray, reset_rows: np.ndarray) -> dict[str, Any]:
         bf = self._bufs
-        out, st, s = bf.out, bf.st, bf.s
-        nq = self._nq
-        r = out[:, O_R].copy()
-        info: dict[str, Any] = {}
-
-        def put(key, value):
-            info[key] = value
-            info["_" + key] = mask.copy()
-
-        terms = {}
-        for name, col in (("vibration", O_VIB), ("time", O_TIME), ("effort", O_EFFORT),
-                          ("residual", O_RESID), ("failure", O_FAIL)):
-            terms[name] = out[:, col].copy()
-            terms["_" + name] = mask.copy()
-        put("reward_terms", terms)
-        put("time", st[:, S_K] * self._dt)
-        put("rotor_speed", s[:, nq + 2].copy())
-        put("whirl_radius", r)
-        put("whirl_ratio", r / self._ref_len)
-        put("vibration_radius", out[:, O_RDYN].copy())
-        put("peak_whirl_radius", st[:, S_PEAK].copy())
-        put("ball_angles", s[:, 3:nq].copy())
-        put("run_up_finished", st[:, S_REACHED] != 0.0)
-        put("time_to_speed", st[:, S_T_REACH].copy())
-        put("time_at_speed", st[:, S_NSETTLE] * self._dt)
-        put("balanced", out[:, O_BAL] != 0.0)
-        put("residual_imbalance_ratio", out[:, O_IMB].copy())
-        codes = out[:, O_FCODE]
-        if codes.any():
-            msgs = np.full(self.num_envs, None, dtype=object)
-            failed = codes != 0
-            for i in np.flatnonzero(failed):
-                msgs[i] = self.setup.failure_message(int(codes[i]), out[i], st[i], s[i])
-            info["failure"] = msgs
-            info["_failure"] = failed
+        info = masked(step_info(self.setup, bf.out, bf.st, bf.s, self._ref_len), mask)
         if len(reset_rows):
             rmask = np.zeros(self.num_envs, dtype=bool)
             rmask[reset_rows] = True
-            keys = ("imbalance", "imbalance_phase", "ball_drag_scale",
-                    "rolling_resistance_scale", "integration_step")
-            for key in keys:
-                arr = np.zeros(self.num_envs)
-                for i in reset_rows:
-                    arr[i] = getattr(self._episodes[i], key)
-                info[key] = arr
-                info["_" + key] = rmask.copy()
-            angles = np.zeros((self.num_envs, nq - 3))
-            sag = np.zeros((self.num_envs, 2))
-            for i in reset_rows:
-                angles[i] = self._episodes[i].ball_angles
-                sag[i] = self._episodes[i].static_deflection
-            info["initial_ball_angles"] = angles
-            info["_initial_ball_angles"] = rmask.copy()
-            info["static_deflection"] = sag
-            info["_static_deflection"] = rmask.copy()
+            info.update(masked(episode_info(self._episodes, reset_rows), rmask))
         return info
 
     def render(self):

@@ -1,7 +1,5 @@
 """Scoring run-ups: metrics from time histories, and (with the environments) the
 policy-versus-baseline evaluation."""
-from .metrics import (best_residual_imbalance, no_ball_amplitude, nonsynchronous_whirl,
-                      residual_imbalance, runup_metrics, trajectory_metrics)
+from .metrics import nonsynchronous_whirl, runup_metrics, trajectory_metrics
 
-__all__ = ["best_residual_imbalance", "no_ball_amplitude", "nonsynchronous_whirl",
-           "residual_imbalance", "runup_metrics", "trajectory_metrics"]
+__all__ = ["nonsynchronous_whirl", "runup_metrics", "trajectory_metrics"]

@@ -23,16 +23,18 @@ from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
-from scipy import stats
 from tqdm import tqdm
 
-from .baseline_policies import spinning_inertia
+from ..physics.rotor import spinning_inertia
 from .metrics import metrics_from_arrays
-from .policies import Policy, resolve
+from .statistics import mean_ci, share_ci
+from .registry import Policy, resolve
 
 METRICS = ("time_to_speed", "peak_whirl", "residual_vibration", "ball_settling_time",
            "balanced", "nonsynchronous_whirl", "drive_energy", "return")
 SHARES = ("balanced", "nonsynchronous_whirl")
+NONNEGATIVE = ("time_to_speed", "peak_whirl", "residual_vibration", "ball_settling_time",
+               "drive_energy")
 UNITS = {"time_to_speed": "s", "peak_whirl": "W_r/e", "residual_vibration": "W_r/e",
          "ball_settling_time": "s", "balanced": "share", "nonsynchronous_whirl": "share",
          "drive_energy": "J", "return": "-"}
@@ -75,6 +77,7 @@ class EvaluationResult:
     seed: int
     episodes: list[dict] = field(default_factory=list)
     rollouts: dict[int, Rollout] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)  # the policy's parameters, if any
 
     def summary(self) -> dict[str, Any]:
         return summarise(self.episodes)
@@ -171,7 +174,10 @@ def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, prese
 
 
 def _run_chunk_task(chunk: Chunk):
-    return run_chunk(chunk)
+    """(episodes, rollouts, the policy's parameters) of one chunk."""
+    policy = resolve(chunk.policy, chunk.env_id, chunk.scene)
+    episodes, rollouts = run_chunk(chunk, policy)
+    return episodes, rollouts, dict(getattr(policy, "params", None) or {})
 
 
 def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: int = 0,
@@ -189,33 +195,13 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     else:
         parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
     result = EvaluationResult(policy, env_id, scene, preset, seed)
-    for eps, rolls in parts:
+    for eps, rolls, params in parts:
         result.episodes.extend(eps)
         result.rollouts.update(rolls)
+        result.params = params
     if result.episodes:
         result.policy = result.episodes[0]["policy"]
     return result
-
-
-def _mean_ci(values: np.ndarray) -> tuple[float, float, float, int]:
-    v = values[np.isfinite(values)]
-    if v.size == 0:
-        return math.nan, math.nan, math.nan, 0
-    mean = float(v.mean())
-    if v.size < 2:
-        return mean, math.nan, math.nan, int(v.size)
-    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-    return mean, mean - half, mean + half, int(v.size)
-
-
-def _wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float, float]:
-    if n == 0:
-        return math.nan, math.nan, math.nan
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return p, centre - half, centre + half
 
 
 def summarise(episodes: list[dict]) -> dict[str, Any]:
@@ -225,9 +211,9 @@ def summarise(episodes: list[dict]) -> dict[str, Any]:
     for key in METRICS:
         vals = np.array([float(e[key]) for e in episodes])
         if key in SHARES:
-            p, lo, hi = _wilson(int(np.nansum(vals)), len(vals))
+            p, lo, hi = share_ci(int(np.nansum(vals)), len(vals))
             out[key] = {"mean": p, "ci_low": lo, "ci_high": hi, "n": len(vals)}
         else:
-            mean, lo, hi, n = _mean_ci(vals)
+            mean, lo, hi, n = mean_ci(vals, nonnegative=key in NONNEGATIVE)
             out[key] = {"mean": mean, "ci_low": lo, "ci_high": hi, "n": n}
     return out

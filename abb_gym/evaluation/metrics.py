@@ -15,8 +15,11 @@ metric                         unit         definition
                                             value (NaN if never at speed)
 ``residual_imbalance``         -            |U0 + sum m_i (E e^(i gam) + R e^(i ph_i))| / U0 at
                                             the end, the imbalance the balls leave uncancelled
+                                            (:mod:`abb_gym.physics.rotor`: the scale is U0
+                                            unless it is 0)
 ``balanced``                   bool         residual imbalance within ``balance_tol`` U0 of the
-                                            best the balls can reach, max(0, U0 - capacity)
+                                            best the balls can reach (unequal balls and race
+                                            eccentricity included: :func:`rotor.best_residual`)
 ``nonsynchronous_whirl``       bool         after the critical speed, some ball slips more than
                                             a full revolution (2 pi) behind the rotor: it
                                             circulates instead of settling
@@ -30,20 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from ..physics import rotor
 from ..physics.scene import Scene
 
 SPEED_FRACTION = 0.99
-
-
-def no_ball_amplitude(scene: Scene, speed: float) -> float:
-    """Steady whirl radius [m] of the same rotor without balls at ``speed`` [rad/s]:
-    U0 w^2 / |k - M w^2 + i c w| (the softer axis of an orthotropic support)."""
-    m = scene.total_mass
-    amp = []
-    for k, c in ((scene.support_stiffness_x, scene.support_damping_x),
-                 (scene.support_stiffness_y, scene.support_damping_y)):
-        amp.append(scene.imbalance * speed ** 2 / math.hypot(k - m * speed ** 2, c * speed))
-    return max(amp)
 
 
 def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
@@ -52,13 +45,14 @@ def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
                   balance_tol: float = 0.1) -> dict[str, Any]:
     """The metrics of the module docstring for one run of ``scene``."""
     angles = np.asarray(ball_angles, float).reshape(len(t), -1)
-    imbalance = residual_imbalance(scene, angles[-1])
+    residual = rotor.residual_imbalance(scene, angles[-1])
+    scale = rotor.imbalance_scale(scene)
     return metrics_from_arrays(
         t, rotor_speed, np.asarray(whirl_radius, float) / scene.reference_length, angles,
         operating_speed=scene.drive_operating_speed if operating_speed is None
         else operating_speed, critical_speed=scene.critical_speed,
-        residual_imbalance=imbalance,
-        balanced=imbalance <= best_residual_imbalance(scene) + balance_tol,
+        residual_imbalance=residual / scale,
+        balanced=rotor.is_balanced(residual, rotor.best_residual(scene), balance_tol, scale),
         torque=torque, settle_window=settle_window, angle_tol=angle_tol)
 
 
@@ -98,20 +92,6 @@ def metrics_from_arrays(t, rotor_speed, whirl_ratio, ball_angles, *, operating_s
         "nonsynchronous_whirl": _slips(t, w, angles, critical_speed, None),
         "drive_energy": energy,
     }
-
-
-def residual_imbalance(scene: Scene, ball_angles) -> float:
-    """|U0 + sum m_i (E e^(i gam) + R e^(i ph_i))| / U0 for ball angles relative to the rotor."""
-    m = np.asarray(scene.ball_mass)
-    ph = np.asarray(ball_angles, float)
-    z = scene.imbalance + np.sum(m * (scene.race_eccentricity * np.exp(1j * scene.race_eccentricity_angle)
-                                      + scene.race_radius * np.exp(1j * ph)))
-    return float(abs(z) / scene.imbalance)
-
-
-def best_residual_imbalance(scene: Scene) -> float:
-    """The smallest residual imbalance / U0 the balls can reach (without eccentricity)."""
-    return max(0.0, 1.0 - scene.balancing_capacity / scene.imbalance)
 
 
 def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles,

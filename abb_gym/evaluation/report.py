@@ -58,7 +58,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
                "seed": first.seed,
-               "policies": [{"policy": r.policy, "summary": r.summary(),
+               "policies": [{"policy": r.policy, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
                "sweep": sweep or []}
     paths["json"].write_text(json.dumps(payload, indent=1, default=_json_default))

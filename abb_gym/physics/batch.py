@@ -1,19 +1,19 @@
-"""Batched compiled RK4: many independent balancers advanced over the same output interval.
+"""Batched fixed-step integration: many independent balancers over the same output interval.
 
 The environments and parameter sweeps advance many copies of the model at once.  This module
-gives them the production integrator of :func:`abb_gym.physics.integrators.rk4_run` in a form
-that works one output interval at a time and over a batch:
+gives them the fixed-step methods of :func:`abb_gym.physics.integrators.run` (RK4 and ETDRK4)
+in a form that works one output interval at a time and over a batch:
 
-* :func:`advance` - one environment over one output interval ``[t0, t1]``.  It is the body of
-  ``rk4_run``'s interval loop, statement for statement: the same segment-pointer rule, the same
-  step count ``m = ceil((piece_end - t) / dt_max - 1e-9)`` and step ``h = (piece_end - t) / m``,
-  the same RK4 stage function (``integrators._rk4_step``, which calls
-  :func:`abb_gym.physics.model.state_derivative`), the same pinning of a prescribed rotor angle at
-  piece ends, and the same non-finite check after every step.  For the same output times the
-  states are therefore bit-identical to ``rk4_run`` (``tests/test_envs_batch.py`` checks this).
-  It also accumulates the time integral and the maximum of the whirl radius over the substeps.
-* :func:`run_batch` - ``rk4_run`` for ``N`` environments (own parameters, own drive tables,
-  shared output times), parallel over environments with ``numba.prange``.
+* :func:`advance` - one environment over one output interval ``[t0, t1]``, with the same
+  segment and step splitting (``integrators.enter_segment`` / ``next_piece``), the same step
+  functions (``integrators._rk4_step`` / ``_etdrk4_step`` over
+  :func:`abb_gym.physics.model.state_derivative`), the same pinning of a prescribed rotor
+  angle at piece ends, and the same non-finite check after every step as ``integrators.run``.
+  For the same output times the states are therefore bit-identical to ``run``
+  (``tests/test_envs_batch.py`` checks this).  It also accumulates the time integral and the
+  maximum of the whirl radius over the substeps.
+* :func:`run_batch` - ``integrators.run`` for ``N`` environments (own parameters, own drive
+  tables, shared output times), parallel over environments with ``numba.prange``.
 
 Array layout (``N`` environments, ``n`` balls, state length ``ns = 2 (3 + n)``):
 

@@ -10,21 +10,9 @@ a :class:`~abb_gym.physics.drives.SpeedProfile` run-up can drive the model.
 Dimensionless model (paper eq. 10; lengths / lambda, time tau = w_n t, w_n = sqrt(k/M) with M
 the total mass including the balls):
 
-==========  ==============================================================  ==============
-parameter   meaning                                                         range
-==========  ==============================================================  ==============
-n_balls     number of balls n                                               >= 1
-mbar        m_b / M, one ball's mass over the total mass                    (0, 1/n)
-epsbar      e / lambda, rotor eccentricity                                  >= 0
-zeta        c / (2 sqrt(M k)), support damping ratio (stationary damper)    >= 0
-beta        c_r / (2 m_b w_n), ball damping ratio (radial and tangential)   >= 0
-eta         k_d d^2 / (m_b lambda^2 w_n^2), circumferential stiffness       >= 0
-f           w_b / w_n = sqrt(k_b/m_b) / w_n, radial spring frequency        > 0
-mu_d        m_d / M, imbalanced rotor mass (default 1 - mbar: the paper)    > 0
-race_radius R / lambda of the conventional comparator (1 in the paper)      > 0
-closed_ring also couple ball n to ball 1 (the paper's eq. 3 is an open       bool
-            chain of n - 1 springs)
-==========  ==============================================================  ==============
+{table}
+
+``mbar`` must also be < 1/n (the balls are part of the total mass).
 
 Equations (derived from the paper's energies T (2), V (3), F (4); the printed (5)-(9) and
 (11)-(14) carry sign errors, physics note B4/B5 - the tests check these equations against a
@@ -73,12 +61,14 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-import yaml
 from numba import njit
 from scipy.integrate import solve_ivp
 from scipy.optimize import root
 
+from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
+                             read_yaml, specs)
 from .drives import SpeedProfile
+from .simulate import PlanarStates
 
 __all__ = ["SpringRodBalancer", "SpringRodTrajectory", "load_spring_rod", "simulate_spring_rod",
            "spring_rod_rhs", "spring_rod_equilibrium", "spring_rod_jacobian",
@@ -86,15 +76,9 @@ __all__ = ["SpringRodBalancer", "SpringRodTrajectory", "load_spring_rod", "simul
 
 
 def spring_rod_configs_dir() -> Path:
-    """Folder of the spring-and-rod parameter files (``configs/spring_rod``)."""
-    return Path(__file__).resolve().parents[2] / "configs" / "spring_rod"
-
-
-_BOUNDS = {  # name -> (lower, inclusive)
-    "mbar": (0.0, False), "epsbar": (0.0, True), "zeta": (0.0, True), "beta": (0.0, True),
-    "eta": (0.0, True), "f": (0.0, False), "mu_d": (0.0, False), "race_radius": (0.0, False),
-    "natural_frequency": (0.0, False), "length_scale": (0.0, False),
-}
+    """Folder of the shipped spring-and-rod parameter files (``configs/spring_rod``)."""
+    from .. import resources
+    return resources.shipped_folder("spring_rod")
 
 
 @dataclass(frozen=True)
@@ -105,45 +89,45 @@ class SpringRodBalancer:
     zeta = beta = 0.1, three balls).
     """
 
-    n_balls: int = 3
-    mbar: float = 0.01
-    epsbar: float = 0.01
-    zeta: float = 0.1
-    beta: float = 0.1
-    eta: float = 0.01
-    f: float = 4.0
-    mu_d: float | None = None
-    race_radius: float = 1.0
-    closed_ring: bool = False
-    natural_frequency: float = 100.0
-    length_scale: float = 0.01
-    name: str = "rezaee_fathi"
-    description: str = ""
-    source: str = ""
+    n_balls: int = declare(3, kind="integer", ge=1, le=64, doc="number of balls n")
+    mbar: float = declare(0.01, gt=0.0, lt=1.0,
+                          doc="m_b / M, one ball's mass over the total mass, < 1/n")
+    epsbar: float = declare(0.01, ge=0.0, le=1e3, doc="e / lambda, rotor eccentricity")
+    zeta: float = declare(0.1, ge=0.0, le=1e3,
+                          doc="c / (2 sqrt(M k)), support damping ratio (stationary damper)")
+    beta: float = declare(0.1, ge=0.0, le=1e3,
+                          doc="c_r / (2 m_b w_n), ball damping ratio (radial and tangential)")
+    eta: float = declare(0.01, ge=0.0, le=1e6,
+                         doc="k_d d^2 / (m_b lambda^2 w_n^2), circumferential stiffness")
+    f: float = declare(4.0, gt=0.0, le=1e3,
+                       doc="w_b / w_n = sqrt(k_b / m_b) / w_n, radial spring frequency")
+    mu_d: float | None = declare(None, gt=0.0, le=1.0, nullable=True,
+                                 doc="m_d / M, imbalanced rotor mass (null: the paper's "
+                                     "1 - mbar)")
+    race_radius: float = declare(1.0, gt=0.0, le=1e3,
+                                 doc="R / lambda of the conventional comparator (1 in the "
+                                     "paper)")
+    closed_ring: bool = declare(False, kind="flag",
+                                doc="also couple ball n to ball 1 (the paper's eq. 3 is an "
+                                    "open chain of n - 1 springs)")
+    natural_frequency: float = declare(100.0, unit="rad/s", gt=0.0, le=1e6,
+                                       doc="w_n, converts physical speed profiles and times")
+    length_scale: float = declare(0.01, unit="m", gt=0.0, le=10.0,
+                                  doc="lambda, converts physical lengths")
+    name: str = declare("rezaee_fathi", kind="text", doc="parameter set name")
+    description: str = declare("", kind="text", doc="what it is")
+    source: str = declare("", kind="text", doc="where the values come from")
 
     def __post_init__(self) -> None:
-        n = self.n_balls
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"field 'n_balls' must be an integer >= 1 (got {n!r})")
-        object.__setattr__(self, "n_balls", int(n))
+        for name, spec in specs(SpringRodBalancer).items():
+            object.__setattr__(self, name, check("spring-and-rod balancer", name,
+                                                 getattr(self, name), spec))
         if self.mu_d is None:
             object.__setattr__(self, "mu_d", 1.0 - float(self.mbar))
-        for name, (lo, incl) in _BOUNDS.items():
-            try:
-                v = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise ValueError(f"field {name!r} must be a number (got "
-                                 f"{getattr(self, name)!r})") from None
-            if not math.isfinite(v) or v < lo or (v == lo and not incl):
-                raise ValueError(f"field {name!r} must be {'>=' if incl else '>'} {lo:g} "
-                                 f"(got {v})")
-            object.__setattr__(self, name, v)
         if self.n_balls * self.mbar >= 1.0:
-            raise ValueError(f"field 'mbar' must be < 1/n_balls = {1 / self.n_balls:g} (the balls "
-                             f"are part of the total mass; got {self.mbar})")
-        if not isinstance(self.closed_ring, bool):
-            raise ValueError(f"field 'closed_ring' must be true or false (got "
-                             f"{self.closed_ring!r})")
+            raise ConfigError(f"spring-and-rod balancer: field 'mbar' must be < 1/n_balls = "
+                              f"{1 / self.n_balls:g} (the balls are part of the total mass; "
+                              f"got {self.mbar})")
 
     def replace(self, **changes: Any) -> "SpringRodBalancer":
         return dataclasses.replace(self, **changes)
@@ -160,23 +144,19 @@ class SpringRodBalancer:
         return self.mu_d * self.epsbar * w * w / math.hypot(1 - w * w, 2 * self.zeta * w)
 
 
+__doc__ = __doc__.replace("{table}", fields_table(
+    SpringRodBalancer, [n for n in specs(SpringRodBalancer)
+                        if n not in ("name", "description", "source")], title="parameter"))
+
+
 def load_spring_rod(name_or_path: str = "rezaee_fathi", **overrides: Any) -> SpringRodBalancer:
-    """Load ``configs/spring_rod/<name>.yaml`` (or a path) and apply overrides."""
-    path = Path(name_or_path)
-    if not (str(name_or_path).endswith((".yaml", ".yml")) or path.exists()):
-        path = spring_rod_configs_dir() / f"{name_or_path}.yaml"
-    if not path.exists():
-        raise ValueError(f"spring-and-rod file {str(path)!r} does not exist")
-    raw = yaml.safe_load(path.read_text())
-    if not isinstance(raw, dict):
-        raise ValueError(f"spring-and-rod file {str(path)!r} must hold a mapping")
+    """Load ``spring_rod/<name>.yaml`` (on the search path of :mod:`abb_gym.resources`) or a
+    path, and apply overrides."""
+    path = locate("spring_rod", name_or_path, "spring-and-rod parameter set")
+    raw = dict(read_yaml(path, "spring-and-rod"))
     raw.setdefault("name", path.stem)
     raw.update(overrides)
-    valid = {f.name for f in dataclasses.fields(SpringRodBalancer)}
-    unknown = sorted(set(raw) - valid)
-    if unknown:
-        raise ValueError(f"unknown field(s) {unknown} in {str(path)!r}; allowed: {sorted(valid)}")
-    return SpringRodBalancer(**raw)
+    return build(SpringRodBalancer, raw, f"spring-and-rod file {str(path)!r}")
 
 
 # ---------------------------------------------------------------------------- equations
@@ -381,8 +361,9 @@ def spring_rod_eigenvalues(params: SpringRodBalancer, speed: float, q, radial: b
 
 # ---------------------------------------------------------------------------- simulation
 @dataclass
-class SpringRodTrajectory:
-    """Result of :func:`simulate_spring_rod`: ``tau`` (dimensionless time), ``states``."""
+class SpringRodTrajectory(PlanarStates):
+    """Result of :func:`simulate_spring_rod`: ``tau`` (dimensionless time), ``states``; lengths
+    in lambda, x and y in the rotating frame (``whirl_radius`` is the paper's r)."""
 
     params: SpringRodBalancer
     tau: np.ndarray
@@ -400,18 +381,9 @@ class SpringRodTrajectory:
         return _state_size(self.params, self.radial)
 
     @property
-    def x(self) -> np.ndarray:
-        """Rotor-centre x in the rotating frame [lambda]."""
-        return self.states[:, 0]
-
-    @property
-    def y(self) -> np.ndarray:
-        return self.states[:, 1]
-
-    @property
     def r(self) -> np.ndarray:
-        """Whirl radius sqrt(x^2 + y^2) [lambda] (the paper's r)."""
-        return np.hypot(self.states[:, 0], self.states[:, 1])
+        """Whirl radius [lambda] (the paper's r)."""
+        return self.whirl_radius
 
     @property
     def ball_angles(self) -> np.ndarray:

@@ -1,73 +1,23 @@
 """Scenes: validated, SI-unit parameter sets for one balancer machine.
 
-A scene is one YAML file in ``configs/scenes/`` (or any path), grouped into sections.  Every
-key of a section becomes the field ``<prefix>_<key>`` of :class:`Scene`
-(``rotor.mass`` -> ``rotor_mass``; the ``balls`` section uses the prefix ``ball``), and any
-field can be overridden by keyword::
+A scene is one YAML file in ``configs/scenes/`` (or a user folder, or any path: see
+:mod:`abb_gym.resources`), grouped into sections.  Every field has a YAML path (the table
+below; ``rotor.mass`` is the field ``rotor_mass``), and any field can be overridden by
+keyword::
 
     scene = load_scene("yoshida_odd", ball_mass=2e-3, support_stiffness=2000.0)
 
 Units are SI throughout and angles are radians.  Per-ball fields accept one number (same for
-every ball) or a list of ``ball_count`` numbers.
+every ball) or a list of ``ball_count`` numbers; ``support.stiffness`` and ``support.damping``
+set both axes.  Fields, units and allowed ranges (declared once on :class:`Scene`; the bounds
+keep every value in the range where the compiled model is meaningful and finite):
 
-Fields (unit, allowed range):
+{table}
 
-==============================  ==========  ==========================================================
-field                           unit        meaning
-==============================  ==========  ==========================================================
-rotor_mass                      kg          rotor and housing mass without the balls, > 0
-rotor_eccentricity              m           offset of the rotor's mass centre (primary imbalance
-                                            m0*e0 = rotor_mass * rotor_eccentricity), >= 0
-rotor_polar_inertia             kg m^2      polar inertia of the spinning part (used with a motor), > 0
-bearing_drag                    N m s       viscous drag torque on the rotor spin, >= 0
-support_stiffness_x, _y         N/m         linear support springs, > 0
-support_damping_x, _y           N s/m       linear support dampers, >= 0
-race_radius                     m           radius of the ball-centre track, > 0
-race_eccentricity               m           offset E of the race centre from the rotor centre, >= 0
-race_eccentricity_angle         rad         angle gamma of that offset, measured from the imbalance
-ball_count                      -           number of balls, >= 1
-ball_mass                       kg          per ball, > 0
-ball_radius                     m           per ball, > 0 and < race_radius
-ball_inertia_factor             -           spin inertia J = factor * m * r^2 (0.4 solid sphere,
-                                            0 point mass), in [0, 1]
-ball_drag                       N s/m       race drag force per relative orbit speed, >= 0
-                                            (Spannan's torque coefficient beta = ball_drag * R^2)
-ball_rolling_resistance         m           rolling-resistance offset beta_b (Yoshida eq. 2-8), >= 0
-ball_angles0                    rad         default initial ball angles relative to the rotor,
-                                            measured from the imbalance
-rolling_regularization_speed    m/s         tanh width replacing sign() in rolling resistance, > 0
-drive_torque_limit              N m         motor torque limit, > 0
-drive_max_acceleration          rad/s^2     largest commanded rotor acceleration, > 0
-drive_operating_speed           rad/s       target operating speed, > 0
-housing_clearance               m           largest whirl radius the housing allows, > 0
-gravity_acceleration            m/s^2       gravity in the balancing plane (horizontal-axis rotor),
-                                            in [0, 100]; 0 = vertical axis (off)
-gravity_angle                   rad         direction of gravity in the fixed x-y frame
-                                            (default -pi/2: along -y, so y is "up")
-contact_stiffness               N/m         ball-ball penalty stiffness, >= 0; 0 = no contact
-contact_damping_ratio           -           damping ratio of the contact oscillation, in [0, 10]
-                                            (default 0.5: restitution 0.16)
-fluid_preset                    -           balancer fluid name (abb_gym.physics.fluids.FLUIDS),
-                                            or empty
-fluid_temperature               K           fluid temperature, in [250, 400] (default 298.15);
-                                            only the Table 6.1 oils have a temperature law
-fluid_density                   kg/m^3      explicit density, >= 0 (0 = from the preset)
-fluid_viscosity                 m^2/s       explicit kinematic viscosity, >= 0 (0 = from the preset)
-fluid_drag_law                  -           "linear" (ball_drag only, default), "stokes",
-                                            "jan_chen_1997" or "spannan_2021" (fluids module)
-fluid_stokes_drag               -           c_d Re of the Stokes regime, >= 0 (0 = the law's own)
-fluid_drag_plateau              -           c_d above Re = 2e4 for "spannan_2021", >= 0 (0 = 0.6)
-fluid_virtual_mass              -           virtual-mass coefficient c_vm (eq. 5.23; 2 for a
-                                            sphere at a wall), in [0, 10]; 0 = off
-friction_kinetic                -           kinetic race friction coefficient mu_k, in [0, 1]
-friction_static                 -           static (adherence) coefficient mu_s, 0 or >= mu_k
-friction_regularization_speed   m/s         tanh width u_reg of the friction law, > 0 (1e-4);
-                                            small values make the balls stick
-friction_stribeck_speed         m/s         speed over which mu_s falls to mu_k, > 0 (1e-3)
-==============================  ==========  ==========================================================
-
-YAML sections ``gravity``, ``contact``, ``fluid`` and ``friction`` map to the fields with those
-prefixes (``fluid: {preset: S0.65, drag_law: spannan_2021}``).
+Cross-field rules: every ball radius < ``race_radius``, the race eccentricity <
+``race_radius``, ``friction_static`` 0 or >= ``friction_kinetic``, a non-linear drag law or a
+virtual mass needs a fluid, and with ball contact the balls must fit in the race without
+overlapping at their initial angles.
 
 Effects are switched on by their parameters, every one off by default: a scene whose rolling
 resistance, race eccentricity, gravity, contact stiffness, fluid drag law, virtual mass and
@@ -81,149 +31,141 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
+from .. import resources
+from ..configuration import ConfigError, check, declare, fields_table, locate, read_yaml, specs
 from . import fluids as _fluids
 
 __all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError"]
 
+ANGLE_LIMIT = 1.0e3  # rad: beyond it, rounding of the angle changes the machine
 
-class SceneError(ValueError):
+
+class SceneError(ConfigError):
     """A scene file or override is invalid; the message names the field and its allowed range."""
 
 
-# name -> (unit, lower bound, lower bound inclusive, upper bound or None, per-ball)
-_NUMERIC_FIELDS: dict[str, tuple[str, float | None, bool, float | None, bool]] = {
-    "rotor_mass": ("kg", 0.0, False, None, False),
-    "rotor_eccentricity": ("m", 0.0, True, None, False),
-    "rotor_polar_inertia": ("kg m^2", 0.0, False, None, False),
-    "bearing_drag": ("N m s", 0.0, True, None, False),
-    "support_stiffness_x": ("N/m", 0.0, False, None, False),
-    "support_stiffness_y": ("N/m", 0.0, False, None, False),
-    "support_damping_x": ("N s/m", 0.0, True, None, False),
-    "support_damping_y": ("N s/m", 0.0, True, None, False),
-    "race_radius": ("m", 0.0, False, None, False),
-    "race_eccentricity": ("m", 0.0, True, None, False),
-    "race_eccentricity_angle": ("rad", None, True, None, False),
-    "ball_mass": ("kg", 0.0, False, None, True),
-    "ball_radius": ("m", 0.0, False, None, True),
-    "ball_inertia_factor": ("-", 0.0, True, 1.0, True),
-    "ball_drag": ("N s/m", 0.0, True, None, True),
-    "ball_rolling_resistance": ("m", 0.0, True, None, True),
-    "ball_angles0": ("rad", None, True, None, True),
-    "rolling_regularization_speed": ("m/s", 0.0, False, None, False),
-    "drive_torque_limit": ("N m", 0.0, False, None, False),
-    "drive_max_acceleration": ("rad/s^2", 0.0, False, None, False),
-    "drive_operating_speed": ("rad/s", 0.0, False, None, False),
-    "housing_clearance": ("m", 0.0, False, None, False),
-    # extended physics (each 0 = off; see the module docstring)
-    "gravity_acceleration": ("m/s^2", 0.0, True, 100.0, False),
-    "gravity_angle": ("rad", None, True, None, False),
-    "contact_stiffness": ("N/m", 0.0, True, None, False),
-    "contact_damping_ratio": ("-", 0.0, True, 10.0, False),
-    "fluid_temperature": ("K", 250.0, True, 400.0, False),
-    "fluid_density": ("kg/m^3", 0.0, True, 2.0e4, False),
-    "fluid_viscosity": ("m^2/s", 0.0, True, 1.0, False),
-    "fluid_stokes_drag": ("-", 0.0, True, 1.0e5, False),
-    "fluid_drag_plateau": ("-", 0.0, True, 100.0, False),
-    "fluid_virtual_mass": ("-", 0.0, True, 10.0, False),
-    "friction_kinetic": ("-", 0.0, True, 1.0, False),
-    "friction_static": ("-", 0.0, True, 1.0, False),
-    "friction_regularization_speed": ("m/s", 0.0, False, None, False),
-    "friction_stribeck_speed": ("m/s", 0.0, False, None, False),
-}
-# text fields with a fixed set of values (checked in _validate)
-_TEXT_FIELDS = ("description", "source", "fluid_preset", "fluid_drag_law")
-_SECTION_PREFIX = {"rotor": "rotor", "support": "support", "race": "race", "balls": "ball",
-                   "drive": "drive", "housing": "housing", "gravity": "gravity",
-                   "contact": "contact", "fluid": "fluid", "friction": "friction"}
-# keys that set two fields at once (isotropic support)
-_SHORTCUTS = {"support_stiffness": ("support_stiffness_x", "support_stiffness_y"),
-              "support_damping": ("support_damping_x", "support_damping_y")}
-# fields whose YAML section key does not follow the prefix rule
-_SPECIAL_KEYS = {("rotor", "bearing_drag"): "bearing_drag",
-                 ("balls", "rolling_regularization_speed"): "rolling_regularization_speed",
-                 ("balls", "count"): "ball_count"}
-_DEFAULTS: dict[str, Any] = {
-    "description": "",
-    "source": "",
-    "bearing_drag": 0.0,
-    "race_eccentricity": 0.0,
-    "race_eccentricity_angle": 0.0,
-    "ball_inertia_factor": 0.4,
-    "ball_rolling_resistance": 0.0,
-    "ball_angles0": 0.0,
-    "rolling_regularization_speed": 1e-3,
-    "gravity_acceleration": 0.0,
-    "gravity_angle": -0.5 * math.pi,
-    "contact_stiffness": 0.0,
-    "contact_damping_ratio": 0.5,
-    "fluid_preset": "",
-    "fluid_temperature": _fluids.T_NOMINAL,
-    "fluid_density": 0.0,
-    "fluid_viscosity": 0.0,
-    "fluid_drag_law": "linear",
-    "fluid_stokes_drag": 0.0,
-    "fluid_drag_plateau": 0.0,
-    "fluid_virtual_mass": 0.0,
-    "friction_kinetic": 0.0,
-    "friction_static": 0.0,
-    "friction_regularization_speed": 1e-4,
-    "friction_stribeck_speed": 1e-3,
-}
+def _angle(doc: str, default: Any = 0.0, yaml: str | None = None, per_ball: bool = False):
+    return declare(default, unit="rad", ge=-ANGLE_LIMIT, le=ANGLE_LIMIT, doc=doc, yaml=yaml,
+                   per_ball=per_ball)
 
 
 @dataclass(frozen=True)
 class Scene:
     """One balancer machine in SI units; see the module docstring for every field and range."""
 
-    name: str
-    rotor_mass: float
-    rotor_eccentricity: float
-    rotor_polar_inertia: float
-    support_stiffness_x: float
-    support_stiffness_y: float
-    support_damping_x: float
-    support_damping_y: float
-    race_radius: float
-    ball_count: int
-    ball_mass: tuple[float, ...]
-    ball_radius: tuple[float, ...]
-    ball_drag: tuple[float, ...]
-    drive_torque_limit: float
-    drive_max_acceleration: float
-    drive_operating_speed: float
-    housing_clearance: float
-    bearing_drag: float = 0.0
-    race_eccentricity: float = 0.0
-    race_eccentricity_angle: float = 0.0
-    ball_inertia_factor: tuple[float, ...] = (0.4,)
-    ball_rolling_resistance: tuple[float, ...] = (0.0,)
-    ball_angles0: tuple[float, ...] = (0.0,)
-    rolling_regularization_speed: float = 1e-3
-    gravity_acceleration: float = 0.0
-    gravity_angle: float = -0.5 * math.pi
-    contact_stiffness: float = 0.0
-    contact_damping_ratio: float = 0.5
-    fluid_preset: str = ""
-    fluid_temperature: float = _fluids.T_NOMINAL
-    fluid_density: float = 0.0
-    fluid_viscosity: float = 0.0
-    fluid_drag_law: str = "linear"
-    fluid_stokes_drag: float = 0.0
-    fluid_drag_plateau: float = 0.0
-    fluid_virtual_mass: float = 0.0
-    friction_kinetic: float = 0.0
-    friction_static: float = 0.0
-    friction_regularization_speed: float = 1e-4
-    friction_stribeck_speed: float = 1e-3
-    description: str = ""
-    source: str = ""
+    name: str = declare(kind="text", doc="scene name")
+    rotor_mass: float = declare(unit="kg", ge=1e-4, le=1e5, yaml="rotor.mass",
+                                doc="rotor and housing mass without the balls")
+    rotor_eccentricity: float = declare(unit="m", ge=0.0, le=1.0, yaml="rotor.eccentricity",
+                                        doc="offset of the rotor's mass centre (primary "
+                                            "imbalance m0 e0 = rotor_mass * eccentricity)")
+    rotor_polar_inertia: float = declare(unit="kg m^2", gt=0.0, le=1e5,
+                                         yaml="rotor.polar_inertia",
+                                         doc="polar inertia of the spinning part (with a motor)")
+    support_stiffness_x: float = declare(unit="N/m", ge=1e-3, le=1e12,
+                                         yaml="support.stiffness_x", doc="support spring, x")
+    support_stiffness_y: float = declare(unit="N/m", ge=1e-3, le=1e12,
+                                         yaml="support.stiffness_y", doc="support spring, y")
+    support_damping_x: float = declare(unit="N s/m", ge=0.0, le=1e9, yaml="support.damping_x",
+                                       doc="support damper, x")
+    support_damping_y: float = declare(unit="N s/m", ge=0.0, le=1e9, yaml="support.damping_y",
+                                       doc="support damper, y")
+    race_radius: float = declare(unit="m", ge=1e-4, le=10.0, yaml="race.radius",
+                                 doc="radius of the ball-centre track")
+    ball_count: int = declare(kind="integer", ge=1, le=64, yaml="balls.count",
+                              doc="number of balls")
+    ball_mass: tuple[float, ...] = declare(unit="kg", ge=1e-7, le=1e3, yaml="balls.mass",
+                                           per_ball=True, doc="per ball")
+    ball_radius: tuple[float, ...] = declare(unit="m", ge=1e-5, le=1.0, yaml="balls.radius",
+                                             per_ball=True, doc="per ball, < race_radius")
+    ball_drag: tuple[float, ...] = declare(unit="N s/m", ge=0.0, le=1e6, yaml="balls.drag",
+                                           per_ball=True,
+                                           doc="race drag per relative orbit speed (Spannan's "
+                                               "torque coefficient = ball_drag R^2)")
+    drive_torque_limit: float = declare(unit="N m", gt=0.0, le=1e6, yaml="drive.torque_limit",
+                                        doc="motor torque limit")
+    drive_max_acceleration: float = declare(unit="rad/s^2", gt=0.0, le=1e6,
+                                            yaml="drive.max_acceleration",
+                                            doc="largest commanded rotor acceleration")
+    drive_operating_speed: float = declare(unit="rad/s", gt=0.0, le=1e5,
+                                           yaml="drive.operating_speed",
+                                           doc="target operating speed")
+    housing_clearance: float = declare(unit="m", gt=0.0, le=10.0, yaml="housing.clearance",
+                                       doc="largest whirl radius the housing allows")
+    bearing_drag: float = declare(0.0, unit="N m s", ge=0.0, le=1e6, yaml="rotor.bearing_drag",
+                                  doc="viscous drag torque on the rotor spin")
+    race_eccentricity: float = declare(0.0, unit="m", ge=0.0, le=1.0,
+                                       yaml="race.eccentricity",
+                                       doc="offset E of the race centre, < race_radius")
+    race_eccentricity_angle: float = _angle("angle gamma of that offset, from the imbalance",
+                                            yaml="race.eccentricity_angle")
+    ball_inertia_factor: tuple[float, ...] = declare((0.4,), ge=0.0, le=1.0, per_ball=True,
+                                                     yaml="balls.inertia_factor",
+                                                     doc="spin inertia J = factor m r^2 (0.4 "
+                                                         "solid sphere, 0 point mass)")
+    ball_rolling_resistance: tuple[float, ...] = declare((0.0,), unit="m", ge=0.0, le=1e-2,
+                                                         per_ball=True,
+                                                         yaml="balls.rolling_resistance",
+                                                         doc="rolling-resistance offset beta_b "
+                                                             "(Yoshida eq. 2-8)")
+    ball_angles0: tuple[float, ...] = _angle("default initial ball angles from the imbalance",
+                                             default=(0.0,), yaml="balls.angles0",
+                                             per_ball=True)
+    rolling_regularization_speed: float = declare(1e-3, unit="m/s", ge=1e-9, le=10.0,
+                                                  yaml="balls.rolling_regularization_speed",
+                                                  doc="tanh width replacing sign() in the "
+                                                      "rolling resistance")
+    gravity_acceleration: float = declare(0.0, unit="m/s^2", ge=0.0, le=100.0,
+                                          yaml="gravity.acceleration",
+                                          doc="gravity in the balancing plane (horizontal "
+                                              "axis); 0 = vertical axis (off)")
+    gravity_angle: float = _angle("direction of gravity in the fixed frame (-pi/2: along -y)",
+                                  default=-0.5 * math.pi, yaml="gravity.angle")
+    contact_stiffness: float = declare(0.0, unit="N/m", ge=0.0, le=1e12,
+                                       yaml="contact.stiffness",
+                                       doc="ball-ball penalty stiffness; 0 = no contact")
+    contact_damping_ratio: float = declare(0.5, ge=0.0, le=10.0, yaml="contact.damping_ratio",
+                                           doc="damping ratio of the contact (0.5: "
+                                               "restitution 0.16)")
+    fluid_preset: str = declare("", kind="text", yaml="fluid.preset",
+                                doc="balancer fluid (abb_gym.physics.fluids.FLUIDS) or empty")
+    fluid_temperature: float = declare(_fluids.T_NOMINAL, unit="K", ge=250.0, le=400.0,
+                                       yaml="fluid.temperature",
+                                       doc="fluid temperature (Table 6.1 oils only)")
+    fluid_density: float = declare(0.0, unit="kg/m^3", ge=0.0, le=2.0e4, yaml="fluid.density",
+                                   doc="explicit density (0 = from the preset)")
+    fluid_viscosity: float = declare(0.0, unit="m^2/s", ge=0.0, le=1.0,
+                                     yaml="fluid.viscosity",
+                                     doc="explicit kinematic viscosity (0 = from the preset)")
+    fluid_drag_law: str = declare("linear", kind="choice", choices=tuple(_fluids.DRAG_LAWS),
+                                  yaml="fluid.drag_law",
+                                  doc="race drag law (linear = ball_drag only)")
+    fluid_stokes_drag: float = declare(0.0, ge=0.0, le=1.0e5, yaml="fluid.stokes_drag",
+                                       doc="c_d Re of the Stokes regime (0 = the law's own)")
+    fluid_drag_plateau: float = declare(0.0, ge=0.0, le=100.0, yaml="fluid.drag_plateau",
+                                        doc="c_d above Re = 2e4, spannan_2021 (0 = 0.6)")
+    fluid_virtual_mass: float = declare(0.0, ge=0.0, le=10.0, yaml="fluid.virtual_mass",
+                                        doc="virtual-mass coefficient (2: sphere at a wall); "
+                                            "0 = off")
+    friction_kinetic: float = declare(0.0, ge=0.0, le=1.0, yaml="friction.kinetic",
+                                      doc="kinetic race friction coefficient")
+    friction_static: float = declare(0.0, ge=0.0, le=1.0, yaml="friction.static",
+                                     doc="static (adherence) coefficient, 0 or >= kinetic")
+    friction_regularization_speed: float = declare(1e-4, unit="m/s", ge=1e-9, le=10.0,
+                                                   yaml="friction.regularization_speed",
+                                                   doc="tanh width of the friction law; small "
+                                                       "values make the balls stick")
+    friction_stribeck_speed: float = declare(1e-3, unit="m/s", ge=1e-9, le=10.0,
+                                             yaml="friction.stribeck_speed",
+                                             doc="speed over which mu_s falls to mu_k")
+    description: str = declare("", kind="text", doc="what the machine is")
+    source: str = declare("", kind="text", doc="where the values come from")
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -330,48 +272,33 @@ class Scene:
     def arrays(self) -> dict[str, np.ndarray]:
         """Per-ball fields as float64 arrays of length ``ball_count``."""
         return {name: np.asarray(getattr(self, name), dtype=np.float64)
-                for name, spec in _NUMERIC_FIELDS.items() if spec[4]}
+                for name, spec in _SPECS.items() if spec.per_ball}
+
+
+_SPECS = specs(Scene)
+__doc__ = __doc__.replace("{table}", fields_table(Scene, [n for n in _SPECS if n != "name"],
+                                                  title="YAML path"))
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(Scene)
+             if f.default is not dataclasses.MISSING}
+# YAML path -> field; support.stiffness and support.damping set both axes
+_BY_PATH = {(spec.yaml or name): name for name, spec in _SPECS.items()}
+_SHORTCUTS = {"support_stiffness": ("support_stiffness_x", "support_stiffness_y"),
+              "support_damping": ("support_damping_x", "support_damping_y")}
+_SECTIONS = {path.split(".")[0] for path in _BY_PATH if "." in path}
 
 
 # ---------------------------------------------------------------------------- validation
-def _check_number(scene_name: str, name: str, value: Any) -> float:
-    unit, lo, lo_incl, hi, _ = _NUMERIC_FIELDS[name]
-    rng = _range_text(name)
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise SceneError(f"scene {scene_name!r}: field {name!r} must be a number {rng} "
-                         f"(got {value!r})") from None
-    if not math.isfinite(v):
-        raise SceneError(f"scene {scene_name!r}: field {name!r} must be finite {rng} (got {v})")
-    if lo is not None and (v < lo or (v == lo and not lo_incl)):
-        raise SceneError(f"scene {scene_name!r}: field {name!r} must be {rng} (got {v} {unit})")
-    if hi is not None and v > hi:
-        raise SceneError(f"scene {scene_name!r}: field {name!r} must be {rng} (got {v} {unit})")
-    return v
-
-
-def _range_text(name: str) -> str:
-    unit, lo, lo_incl, hi, _ = _NUMERIC_FIELDS[name]
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>=' if lo_incl else '>'} {lo:g}")
-    if hi is not None:
-        parts.append(f"<= {hi:g}")
-    return (" and ".join(parts) + f" [{unit}]") if parts else f"[{unit}]"
-
-
 def _validate(s: Scene) -> None:
-    for name, spec in _NUMERIC_FIELDS.items():
-        if spec[4]:
-            values = getattr(s, name)
-            if len(values) != s.ball_count:
-                raise SceneError(f"scene {s.name!r}: field {name!r} has {len(values)} values; "
-                                 f"it needs one or ball_count = {s.ball_count}")
-            for v in values:
-                _check_number(s.name, name, v)
+    for name, spec in _SPECS.items():
+        value = getattr(s, name)
+        if spec.per_ball:
+            if not isinstance(value, tuple) or len(value) != s.ball_count:
+                raise SceneError(f"scene {s.name!r}: field {name!r} needs one value or "
+                                 f"ball_count = {s.ball_count} values (got {value!r})")
+            for v in value:
+                check(f"scene {s.name!r}", name, v, spec, SceneError)
         else:
-            _check_number(s.name, name, getattr(s, name))
+            check(f"scene {s.name!r}", name, value, spec, SceneError)
     for r in s.ball_radius:
         if r >= s.race_radius:
             raise SceneError(f"scene {s.name!r}: field 'ball_radius' must be < race_radius = "
@@ -432,21 +359,17 @@ def _validate_extended(s: Scene) -> None:
 
 
 def _as_ball_tuple(scene_name: str, name: str, value: Any, count: int) -> tuple[float, ...]:
-    if isinstance(value, (list, tuple, np.ndarray)):
-        vals = [float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v
-                for v in value]
-        if len(vals) == 1:
-            vals = vals * count
-    else:
-        vals = [value] * count
+    vals = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    if len(vals) == 1:
+        vals = vals * count
     if len(vals) != count:
         raise SceneError(f"scene {scene_name!r}: field {name!r} has {len(vals)} values; it needs "
                          f"one or ball_count = {count}")
-    return tuple(_check_number(scene_name, name, v) for v in vals)
+    return tuple(check(f"scene {scene_name!r}", name, v, _SPECS[name], SceneError) for v in vals)
 
 
 def _build(data: Mapping[str, Any], scene_name: str) -> Scene:
-    valid = {f.name for f in dataclasses.fields(Scene)}
+    valid = set(_SPECS)
     unknown = sorted(set(data) - valid)
     if unknown:
         raise SceneError(f"scene {scene_name!r}: unknown field(s) {unknown}; allowed: "
@@ -455,22 +378,17 @@ def _build(data: Mapping[str, Any], scene_name: str) -> Scene:
     missing = sorted(valid - set(full))
     if missing:
         raise SceneError(f"scene {scene_name!r}: missing field(s) {missing}")
-    count = full["ball_count"]
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise SceneError(f"scene {scene_name!r}: field 'ball_count' must be an integer >= 1 "
-                         f"(got {count!r})")
-    kwargs: dict[str, Any] = {"ball_count": int(count)}
+    where = f"scene {scene_name!r}"
+    count = check(where, "ball_count", full["ball_count"], _SPECS["ball_count"], SceneError)
+    kwargs: dict[str, Any] = {"ball_count": count}
     for name in valid - {"ball_count"}:
         v = full[name]
-        if name in _NUMERIC_FIELDS:
-            if _NUMERIC_FIELDS[name][4]:
-                v = _as_ball_tuple(scene_name, name, v, int(count))
-            else:
-                v = _check_number(scene_name, name, v)
-        elif not isinstance(v, str):
-            raise SceneError(f"scene {scene_name!r}: field {name!r} must be text (got {v!r})")
-        elif name == "fluid_preset" and v:
-            v = _fluids.canonical_fluid_name(v) or v
+        if _SPECS[name].per_ball:
+            v = _as_ball_tuple(scene_name, name, v, count)
+        else:
+            v = check(where, name, v, _SPECS[name], SceneError)
+            if name == "fluid_preset" and v:
+                v = _fluids.canonical_fluid_name(v) or v
         kwargs[name] = v
     return Scene(**kwargs)
 
@@ -484,46 +402,51 @@ def _apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], scene_n
             data[key] = value
     if "ball_count" in overrides:
         # per-ball lists of the old length cannot follow a new count; a single value can
-        for name, spec in _NUMERIC_FIELDS.items():
+        for name, spec in _SPECS.items():
             v = data.get(name)
-            if spec[4] and name not in overrides and isinstance(v, (list, tuple)) \
+            if spec.per_ball and name not in overrides and isinstance(v, (list, tuple)) \
                     and len(set(v)) == 1:
                 data[name] = v[0]
 
 
 def _flatten_yaml(raw: Mapping[str, Any], scene_name: str) -> dict[str, Any]:
+    """YAML sections -> fields by the declared paths (``rotor.mass`` -> ``rotor_mass``)."""
     flat: dict[str, Any] = {}
     for key, value in raw.items():
-        if key in _SECTION_PREFIX:
+        if key in _SECTIONS:
             if not isinstance(value, Mapping):
                 raise SceneError(f"scene {scene_name!r}: section {key!r} must be a mapping")
             for sub, v in value.items():
-                name = _SPECIAL_KEYS.get((key, sub), f"{_SECTION_PREFIX[key]}_{sub}")
-                if name in _SHORTCUTS:
-                    for target in _SHORTCUTS[name]:
+                path = f"{key}.{sub}"
+                shortcut = f"{key}_{sub}"
+                if shortcut in _SHORTCUTS:
+                    for target in _SHORTCUTS[shortcut]:
                         flat[target] = v
+                elif path in _BY_PATH:
+                    flat[_BY_PATH[path]] = v
                 else:
-                    flat[name] = v
+                    raise SceneError(f"scene {scene_name!r}: unknown key {path!r}; allowed in "
+                                     f"section {key!r}: "
+                                     f"{sorted(p for p in _BY_PATH if p.startswith(key + '.'))}")
         else:
-            flat[key] = value
+            flat[_BY_PATH.get(key, key)] = value
     return flat
 
 
 # ---------------------------------------------------------------------------- loading
 def scenes_dir() -> Path:
-    """Folder of the named scenes: ``$ABB_GYM_CONFIGS/scenes`` or the checkout's ``configs/scenes``."""
-    root = os.environ.get("ABB_GYM_CONFIGS")
-    base = Path(root) if root else Path(__file__).resolve().parents[2] / "configs"
-    return base / "scenes"
+    """Folder of the shipped scenes (``configs/scenes``, package data in a wheel)."""
+    return resources.shipped_folder("scenes")
 
 
 def list_scenes() -> list[str]:
-    """Names of the scenes shipped in ``configs/scenes``."""
-    return sorted(p.stem for p in scenes_dir().glob("*.yaml"))
+    """Names of the scenes on the search path (user folders and the shipped ones)."""
+    return resources.names("scenes")
 
 
 def load_scene(name_or_path: str | os.PathLike | Scene, **overrides: Any) -> Scene:
-    """Load a scene by name (``configs/scenes/<name>.yaml``) or path and apply overrides.
+    """Load a scene by name (on the search path of :mod:`abb_gym.resources`) or path and
+    apply overrides.
 
     Overrides are flat field names (see the module docstring), plus ``support_stiffness`` and
     ``support_damping`` which set both axes.  A Scene passed in is copied with the overrides.
@@ -531,21 +454,11 @@ def load_scene(name_or_path: str | os.PathLike | Scene, **overrides: Any) -> Sce
     """
     if isinstance(name_or_path, Scene):
         return name_or_path.replace(**overrides) if overrides else name_or_path
-    text = str(name_or_path)
-    path = Path(text)
-    if not (text.endswith((".yaml", ".yml")) or path.exists()):
-        path = scenes_dir() / f"{text}.yaml"
-        if not path.exists():
-            raise SceneError(f"unknown scene {text!r}; available: {', '.join(list_scenes())} "
-                             f"(or give a path to a YAML file)")
-    if not path.exists():
-        raise SceneError(f"scene file {str(path)!r} does not exist")
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise SceneError(f"scene file {str(path)!r} is not valid YAML: {exc}") from None
-    if not isinstance(raw, Mapping):
-        raise SceneError(f"scene file {str(path)!r} must hold a mapping of sections")
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise SceneError(f"scene must be a scene name, a path or a Scene (got "
+                         f"{name_or_path!r})")
+    path = locate("scenes", name_or_path, "scene", SceneError)
+    raw = read_yaml(path, "scene", SceneError)
     scene_name = str(raw.get("name", path.stem))
     data = _flatten_yaml(raw, scene_name)
     data.setdefault("name", path.stem)

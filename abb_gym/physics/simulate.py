@@ -116,9 +116,30 @@ def initial_state(scene: Scene, drive, ball_angles0=None, ball_speeds0=None,
     return s
 
 
+class PlanarStates:
+    """Accessors of a state history whose first two columns are the rotor centre (x, y)."""
+
+    states: np.ndarray
+
+    @property
+    def x(self) -> np.ndarray:
+        """Rotor-centre deflection x (the trajectory's length unit)."""
+        return self.states[:, 0]
+
+    @property
+    def y(self) -> np.ndarray:
+        """Rotor-centre deflection y (the trajectory's length unit)."""
+        return self.states[:, 1]
+
+    @property
+    def whirl_radius(self) -> np.ndarray:
+        """W_r = sqrt(x^2 + y^2) (the trajectory's length unit)."""
+        return np.hypot(self.states[:, 0], self.states[:, 1])
+
+
 @dataclass
-class Trajectory:
-    """Result of :func:`simulate`; arrays are sampled at ``t`` [s].
+class Trajectory(PlanarStates):
+    """Result of :func:`simulate`; arrays are sampled at ``t`` [s]; lengths in m.
 
     ``ball_angles`` are relative to the rotor, measured from the imbalance, unwrapped [rad].
     """
@@ -142,16 +163,6 @@ class Trajectory:
         return 3 + self.n_balls
 
     @property
-    def x(self) -> np.ndarray:
-        """Rotor-centre deflection x [m]."""
-        return self.states[:, 0]
-
-    @property
-    def y(self) -> np.ndarray:
-        """Rotor-centre deflection y [m]."""
-        return self.states[:, 1]
-
-    @property
     def rotor_angle(self) -> np.ndarray:
         """Rotor angle psi [rad]."""
         return self.states[:, 2]
@@ -170,11 +181,6 @@ class Trajectory:
     def ball_speeds(self) -> np.ndarray:
         """Ball angular speeds relative to the rotor, shape (T, n) [rad/s]."""
         return self.states[:, self._nq + 3:]
-
-    @property
-    def whirl_radius(self) -> np.ndarray:
-        """W_r = sqrt(x^2 + y^2) [m]."""
-        return np.hypot(self.x, self.y)
 
     @property
     def whirl_ratio(self) -> np.ndarray:
@@ -264,10 +270,12 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
     ball_angles0, ball_speeds0 : initial ball angles [rad] (default: the scene's) and relative
         speeds [rad/s] (default 0)
     x0, v0 : initial deflection [m] and velocity [m/s] of the rotor centre
-    method : compiled "rk4" (fixed step, default), "dopri5" (adaptive 5(4)), "ros2" (fixed
-        step, L-stable Rosenbrock for stiff drag), or a ``solve_ivp`` method ("DOP853",
-        "Radau", "RK45", "LSODA", "BDF") through the same compiled right-hand side
-    dt : step of "rk4"/"ros2", first trial step of "dopri5" [s]; default :func:`default_step`
+    method : compiled "rk4" (fixed step, default), "etdrk4" (fixed step, exponential: the
+        stiff ball drag integrated exactly), "ros2" (fixed step, L-stable Rosenbrock, any
+        stiffness), "dopri5" (adaptive 5(4)), or a ``solve_ivp`` method ("DOP853", "Radau",
+        "RK45", "LSODA", "BDF") through the same compiled right-hand side
+    dt : step of "rk4"/"etdrk4"/"ros2", first trial step of "dopri5" [s]; default
+        :func:`default_step`
     output_dt : sampling interval of the result [s]; default 1 ms (it also caps the step)
     rtol, atol : tolerances of "dopri5" (default 1e-6) and of ``solve_ivp`` (default 1e-10);
         atol defaults to rtol x the state scale (reference length for x, y; 1 for angles)

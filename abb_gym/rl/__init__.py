@@ -11,13 +11,13 @@ Needs the training extra (``pip install -c constraints.txt 'abb-gym[train]'``).
 :func:`train`                        one PPO run -> run folder (``abb-gym train``)
 :func:`load_policy`, PPOPolicy       a run folder or shipped agent as an evaluation ``Policy``
                                      with frozen VecNormalize statistics
-:func:`run_episodes`, summarize      a policy *object* on the seeded test set of
+:func:`run_episodes`, summarise      a policy *object* on the seeded test set of
                                      :mod:`abb_gym.evaluation.evaluate` (same metrics)
 ===================================  ===========================================================
 
-Importing this package registers the ``ppo`` policy loader, so ``--policy ppo:PATH`` resolves
-in :func:`abb_gym.evaluation.policies.resolve` (PATH: a run folder or a name in
-``agents/trained``).
+``--policy ppo:PATH`` resolves through the ``abb_gym.policies`` entry point
+:func:`abb_gym.rl.agent.load_ppo` (PATH: a run folder or an agent's name on the search path
+of :mod:`abb_gym.resources`).
 """
 from __future__ import annotations
 
@@ -36,16 +36,15 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
     raise ImportError(f"abb_gym.rl needs the training extra: pip install -c constraints.txt "
                       f"'abb-gym[train]' ({exc})") from exc
 
-from ..evaluation.policies import register_loader
 from .config import (POLICY_FIELDS, TrainConfig, eval_env_kwargs, load_config,
                      make_native_env, make_sb3_env)
-from .policy import PPOPolicy, _loader, load_policy, trained_dir
-from .rollout import run_episodes, summarize
+from .agent import PPOPolicy, load_policy, load_ppo, trained_dir
+from ..evaluation.evaluate import summarise
+from .rollout import run_episodes
 from .train import RunResult, train
 from .vec_env import NativeVecEnv, split_info
 
 __all__ = ["NativeVecEnv", "split_info", "TrainConfig", "load_config", "make_sb3_env",
            "make_native_env", "eval_env_kwargs", "POLICY_FIELDS", "train", "RunResult",
-           "PPOPolicy", "load_policy", "trained_dir", "run_episodes", "summarize"]
+           "PPOPolicy", "load_policy", "load_ppo", "trained_dir", "run_episodes", "summarise"]
 
-register_loader("ppo", _loader)

@@ -1,33 +1,42 @@
-"""PPO training configurations (rl-baselines3-zoo style) and the environments they build.
+"""PPO training configurations (rl-baselines3-zoo format) and the environments they build.
 
-A file in ``configs/ppo/`` maps environment ids to their hyperparameters::
+A file in ``configs/ppo/`` holds, under the environment id, hyperparameters that
+rl-baselines3-zoo reads unchanged (``python -m rl_zoo3.train --algo ppo --env
+abb_gym/RunUpSpeed-v0 --gym-packages abb_gym -conf FILE``), and under ``_abb_gym`` the
+settings only ``abb-gym train`` uses (rl_zoo3 ignores keys that are not environment ids)::
 
     abb_gym/RunUpSpeed-v0:
       n_envs: 16                    # sub-environments of the native vector environment
       n_timesteps: 800000           # environment steps (all sub-environments together)
-      policy: BoundedMlpPolicy      # or MlpPolicy (see abb_gym.rl.policies)
-      normalize: {norm_obs: true, norm_reward: true}   # VecNormalize kwargs, or true/false
-      policy_kwargs: {net_arch: [64, 64], activation_fn: Tanh}
+      policy: abb_gym.rl.networks.BoundedMlpPolicy     # or MlpPolicy
+      normalize: "dict(norm_obs=True, norm_reward=True)"   # true/false or VecNormalize kwargs
+      policy_kwargs: "dict(net_arch=[64, 64], activation_fn=nn.Tanh)"
       learning_rate: lin_3.0e-4     # a number or lin_<start> (linear decay to 0)
       n_steps: 256                  # ... any other PPO keyword
-      env_kwargs:                   # gym.make_vec keywords: scene, preset, observe_balls,
+      env_kwargs:                   # gym.make keywords: scene, preset, observe_balls,
         scene: yoshida_odd          # and any preset field (see abb_gym.envs.config)
         preset: train
         control_interval: 0.05
-        reward: {residual: 3.0}
-      eval_env_kwargs: {preset: test}     # the held-out evaluation environment (see below)
+    _abb_gym:
+      eval_env_kwargs: {reward: {residual: 3.0}}  # the held-out evaluation (see below)
       eval_freq: 50000              # env steps between evaluations (0: none)
       eval_episodes: 64             # episodes per evaluation (a fixed, seeded test set)
       eval_seed: 1000               # seed of the test set
       checkpoint_freq: 200000       # env steps between checkpoints (0: none)
       bootstrap_truncated: true     # report truncations to SB3 as TimeLimit.truncated
 
-Keys other than the ones above and PPO's keyword arguments raise ``ValueError`` naming the key.
-A file may hold several ids; ``load_config(path, env_id)`` picks one (a file with one id needs
-no ``env_id``).  Top-level keys starting with ``_`` are ignored (a run's ``config.yml`` keeps
-its metadata under ``_run``, so it can be trained again as it is).  ``activation_fn`` may be a name of ``torch.nn`` (``Tanh``, ``ReLU``);
-``policy_kwargs`` may also be a zoo string such as ``"dict(net_arch=[64, 64])"``, evaluated with
-only ``dict`` and ``nn`` in scope.
+The keys, declared once on :class:`TrainConfig`:
+
+{table}
+
+Any other key under the id must be a PPO keyword argument.  The ``_abb_gym`` keys are also
+accepted under the id (files of the first wave).  ``policy_kwargs`` and ``normalize`` may be
+mappings or the zoo's Python strings, which are read without evaluating code
+(:func:`abb_gym.configuration.parse_python_literal`: literals, ``dict(...)`` and ``nn.X``);
+``activation_fn`` may name a ``torch.nn`` activation (``Tanh``).  A file may hold several ids;
+``load_config(path, env_id)`` picks one.  Top-level keys starting with ``_`` other than
+``_abb_gym`` are ignored (a run's ``config.yml`` keeps its metadata under ``_run``, so it can
+be trained again as it is).
 
 The evaluation environment is ``{scene, preset: "test"}`` plus the *policy-relevant* fields of
 ``env_kwargs`` (:data:`POLICY_FIELDS`: what changes the observation or the meaning of an
@@ -39,65 +48,50 @@ from __future__ import annotations
 import copy
 import inspect
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
 
 import gymnasium as gym
-import yaml
+
+from .. import resources
+from ..configuration import (ConfigError, check, declare, fields_table, locate,
+                             parse_python_literal, read_yaml, specs)
 
 __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
-           "linear_schedule", "resolve_policy_kwargs"]
+           "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION"]
 
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
                  "vibration_filter_time", "dwell")
 ENV_KEYWORDS = ("scene", "preset", "observe_balls")
+ABB_GYM_SECTION = "_abb_gym"
+POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
+                "BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
+                "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy"}
 
-_EXTRA_KEYS = {
-    "n_envs": "integer >= 1",
-    "n_timesteps": "integer >= 1",
-    "policy": "'MlpPolicy' or 'BoundedMlpPolicy'",
-    "normalize": "true, false or a mapping of VecNormalize keywords",
-    "policy_kwargs": "mapping (or zoo string)",
-    "env_kwargs": "mapping",
-    "eval_env_kwargs": "mapping",
-    "eval_freq": "integer >= 0",
-    "eval_episodes": "integer >= 1",
-    "eval_seed": "integer >= 0",
-    "checkpoint_freq": "integer >= 0",
-    "bootstrap_truncated": "true or false",
-}
+
+class TrainConfigError(ConfigError):
+    """A PPO configuration is invalid (the message names the key and the file)."""
 
 
 def configs_dir() -> Path:
-    """``$ABB_GYM_CONFIGS/ppo`` or the repository's ``configs/ppo``."""
-    root = os.environ.get("ABB_GYM_CONFIGS")
-    base = Path(root) if root else Path(__file__).resolve().parents[2] / "configs"
-    return base / "ppo"
+    """Folder of the shipped PPO configs (``configs/ppo``)."""
+    return resources.shipped_folder("ppo")
 
 
 def config_path(name_or_path: str | os.PathLike) -> Path:
-    """A config file from a path or a name in :func:`configs_dir` (``.yml``/``.yaml``)."""
-    p = Path(name_or_path)
-    if p.exists():
-        return p
-    for ext in (".yml", ".yaml", ""):
-        q = configs_dir() / f"{name_or_path}{ext}"
-        if q.exists():
-            return q
-    names = sorted(x.stem for x in configs_dir().glob("*.y*ml"))
-    raise ValueError(f"unknown PPO config {str(name_or_path)!r}; available in "
-                     f"{configs_dir()}: {', '.join(names) or 'none'} (or give a path)")
+    """A config file from a path or a name on the search path (``ppo/<name>.yml``)."""
+    return locate("ppo", name_or_path, "PPO config", TrainConfigError)
 
 
 def _ppo_keywords() -> set[str]:
     from stable_baselines3 import PPO
     params = set(inspect.signature(PPO.__init__).parameters)
     return params - {"self", "policy", "env", "policy_kwargs", "seed", "device",
-                     "_init_setup_model", "tensorboard_log", "verbose"}
+                     "_init_setup_model", "verbose"}
 
 
 def linear_schedule(start: float):
@@ -110,152 +104,153 @@ def linear_schedule(start: float):
 
 def _schedule(key: str, value: Any):
     if isinstance(value, str) and value.startswith("lin_"):
-        try:
-            start = float(value[4:])
-        except ValueError:
-            raise ValueError(f"{key} must be a number > 0 or 'lin_<number>' (got "
-                             f"{value!r})") from None
-        if start <= 0:
-            raise ValueError(f"{key} must be > 0 (got {value!r})")
+        start = check("", key, value[4:], declare(gt=0.0).metadata["spec"], TrainConfigError)
         return linear_schedule(start)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-        raise ValueError(f"{key} must be a number > 0 or 'lin_<number>' (got {value!r})")
-    return float(value)
+    return check("", key, value, declare(gt=0.0).metadata["spec"], TrainConfigError)
+
+
+def _torch_nn():
+    from torch import nn
+    return nn
 
 
 def resolve_policy_kwargs(value: Any) -> dict[str, Any]:
-    """``policy_kwargs`` with ``activation_fn`` names turned into ``torch.nn`` classes."""
-    from torch import nn
+    """``policy_kwargs`` (a mapping or a zoo string) with ``activation_fn`` as a
+    ``torch.nn`` class."""
+    nn = _torch_nn()
     if value is None:
         return {}
     if isinstance(value, str):
-        try:
-            value = eval(value, {"__builtins__": {}}, {"dict": dict, "nn": nn})  # noqa: S307
-        except Exception as exc:
-            raise ValueError(f"policy_kwargs string {value!r} could not be read: {exc}"
-                             ) from None
+        value = parse_python_literal(value, {"nn": nn}, "policy_kwargs", TrainConfigError)
     if not isinstance(value, Mapping):
-        raise ValueError(f"policy_kwargs must be a mapping (got {value!r})")
+        raise TrainConfigError(f"policy_kwargs must be a mapping (got {value!r})")
     out = dict(value)
     act = out.get("activation_fn")
     if isinstance(act, str):
         name = act.split(".")[-1]
         if not hasattr(nn, name):
-            raise ValueError(f"policy_kwargs.activation_fn must name a torch.nn activation "
-                             f"such as Tanh or ReLU (got {act!r})")
+            raise TrainConfigError(f"policy_kwargs.activation_fn must name a torch.nn "
+                                   f"activation such as Tanh or ReLU (got {act!r})")
         out["activation_fn"] = getattr(nn, name)
     return out
 
 
-def _int(key: str, value: Any, lo: int) -> int:
-    if isinstance(value, bool):
-        raise ValueError(f"{key} must be an integer >= {lo} (got {value!r})")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{key} must be an integer >= {lo} (got {value!r})") from None
-    if v != int(v) or v < lo:
-        raise ValueError(f"{key} must be an integer >= {lo} (got {value!r})")
-    return int(v)
+def zoo_policy_kwargs(value: Any) -> str | None:
+    """``policy_kwargs`` as the zoo's string (``"dict(..., activation_fn=nn.Tanh)"``)."""
+    if value is None:
+        return None
+    resolved = resolve_policy_kwargs(value)
+    parts = []
+    for key, v in resolved.items():
+        if isinstance(v, type):
+            parts.append(f"{key}=nn.{v.__name__}")
+        else:
+            parts.append(f"{key}={v!r}")
+    return f"dict({', '.join(parts)})"
+
+
+def _normalize(value: Any) -> dict[str, Any] | None:
+    if isinstance(value, str):
+        value = parse_python_literal(value, {}, "normalize", TrainConfigError)
+    if value is True:
+        return {"norm_obs": True, "norm_reward": True}
+    if value is False or value is None:
+        return None
+    if not isinstance(value, Mapping):
+        raise TrainConfigError(f"field 'normalize' must be true, false or a mapping of "
+                               f"VecNormalize keywords (got {value!r})")
+    return dict(value)
 
 
 @dataclass
 class TrainConfig:
     """One validated training configuration (see the module docstring for every key)."""
 
-    env_id: str
-    n_envs: int = 16
-    n_timesteps: int = 500_000
-    policy: str = "MlpPolicy"
-    normalize: dict[str, Any] | None = field(default_factory=lambda: {"norm_obs": True,
-                                                                      "norm_reward": True})
-    policy_kwargs: Any = None
-    hyperparams: dict[str, Any] = field(default_factory=dict)
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
-    eval_freq: int = 50_000
-    eval_episodes: int = 64
-    eval_seed: int = 1000
-    checkpoint_freq: int = 0
-    bootstrap_truncated: bool = True
-    source: str = ""
+    env_id: str = declare(kind="text", doc="registered environment id")
+    n_envs: int = declare(16, kind="integer", ge=1, le=65536,
+                          doc="sub-environments of the native vector environment")
+    n_timesteps: int = declare(500_000, kind="integer", ge=1, le=10**11,
+                               doc="environment steps, all sub-environments together")
+    policy: str = declare("MlpPolicy", kind="choice", choices=tuple(POLICY_NAMES),
+                          doc="MlpPolicy or abb_gym.rl.networks.BoundedMlpPolicy")
+    normalize: dict[str, Any] | None = declare(kind="any",
+                                               factory=lambda: {"norm_obs": True,
+                                                                "norm_reward": True},
+                                               doc="VecNormalize: true, false or its kwargs")
+    policy_kwargs: Any = declare(None, kind="any", doc="policy keywords (mapping or zoo "
+                                                       "string)")
+    hyperparams: dict[str, Any] = declare(kind="any", factory=dict,
+                                          doc="the other PPO keyword arguments")
+    env_kwargs: dict[str, Any] = declare(kind="any", factory=dict,
+                                         doc="gym.make keywords of the training environment")
+    eval_env_kwargs: dict[str, Any] = declare(kind="any", factory=dict,
+                                              doc="_abb_gym: keywords added to the evaluation "
+                                                  "environment")
+    eval_freq: int = declare(50_000, kind="integer", ge=0, le=10**11,
+                             doc="_abb_gym: env steps between evaluations (0: none)")
+    eval_episodes: int = declare(64, kind="integer", ge=1, le=10**6,
+                                 doc="_abb_gym: episodes per evaluation")
+    eval_seed: int = declare(1000, kind="integer", ge=0, le=2**31,
+                             doc="_abb_gym: seed of the evaluation test set")
+    checkpoint_freq: int = declare(0, kind="integer", ge=0, le=10**11,
+                                   doc="_abb_gym: env steps between checkpoints (0: none)")
+    bootstrap_truncated: bool = declare(True, kind="flag",
+                                        doc="_abb_gym: report truncations as "
+                                            "TimeLimit.truncated")
+    source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
-    def from_mapping(cls, env_id: str, raw: Mapping[str, Any], source: str = ""
-                     ) -> "TrainConfig":
+    def from_mapping(cls, env_id: str, raw: Mapping[str, Any], source: str = "",
+                     extra: Mapping[str, Any] | None = None) -> "TrainConfig":
+        """A config from the entry of ``env_id`` (zoo keys and PPO keywords) and the
+        ``_abb_gym`` settings ``extra``."""
+        where = f"{source or 'PPO config'} [{env_id}]"
         if env_id not in gym.registry:
             import abb_gym  # noqa: F401  (registers the ids)
         if env_id not in gym.registry:
-            raise ValueError(f"unknown environment id {env_id!r}; registered abb_gym ids: "
-                             f"{sorted(k for k in gym.registry if k.startswith('abb_gym/'))}")
+            raise TrainConfigError(f"unknown environment id {env_id!r}; registered abb_gym "
+                                   f"ids: {sorted(k for k in gym.registry if k.startswith('abb_gym/'))}")
         if not isinstance(raw, Mapping):
-            raise ValueError(f"{source or 'config'}: the entry of {env_id!r} must be a mapping "
-                             f"of hyperparameters (got {raw!r})")
-        raw = copy.deepcopy(dict(raw))
+            raise TrainConfigError(f"{where}: the entry must be a mapping of hyperparameters "
+                                   f"(got {raw!r})")
+        if extra is not None and not isinstance(extra, Mapping):
+            raise TrainConfigError(f"{where}: {ABB_GYM_SECTION} must be a mapping (got "
+                                   f"{extra!r})")
+        raw = {**copy.deepcopy(dict(raw)), **copy.deepcopy(dict(extra or {}))}
+        table = specs(cls)
+        own = set(table) - {"env_id", "hyperparams", "source"}
         ppo_keys = _ppo_keywords()
-        unknown = sorted(set(raw) - set(_EXTRA_KEYS) - ppo_keys)
+        unknown = sorted(set(raw) - own - ppo_keys)
         if unknown:
-            raise ValueError(f"{source or 'config'} [{env_id}]: unknown key(s) {unknown}; "
-                             f"allowed: {sorted(_EXTRA_KEYS)} and the PPO keywords "
-                             f"{sorted(ppo_keys)}")
-        cfg = cls(env_id=env_id, source=str(source))
-        if "n_envs" in raw:
-            cfg.n_envs = _int("n_envs", raw.pop("n_envs"), 1)
-        if "n_timesteps" in raw:
-            cfg.n_timesteps = _int("n_timesteps", raw.pop("n_timesteps"), 1)
-        if "policy" in raw:
-            cfg.policy = str(raw.pop("policy"))
-            if cfg.policy not in ("MlpPolicy", "BoundedMlpPolicy"):
-                raise ValueError(f"policy must be 'MlpPolicy' or 'BoundedMlpPolicy' (flat Box "
-                                 f"observations; see abb_gym.rl.policies; got {cfg.policy!r})")
-        if "normalize" in raw:
-            norm = raw.pop("normalize")
-            if isinstance(norm, str):
-                try:
-                    norm = eval(norm, {"__builtins__": {}}, {"dict": dict,  # noqa: S307
-                                                             "True": True, "False": False})
-                except Exception:
-                    raise ValueError(f"normalize must be true, false or a mapping (got "
-                                     f"{norm!r})") from None
-            if norm is True:
-                norm = {"norm_obs": True, "norm_reward": True}
-            elif norm is False or norm is None:
-                norm = None
-            elif not isinstance(norm, Mapping):
-                raise ValueError(f"normalize must be true, false or a mapping of VecNormalize "
-                                 f"keywords (got {norm!r})")
-            cfg.normalize = None if norm is None else dict(norm)
-        if "policy_kwargs" in raw:
-            cfg.policy_kwargs = raw.pop("policy_kwargs")
-            resolve_policy_kwargs(cfg.policy_kwargs)  # validate now
-        for key in ("env_kwargs", "eval_env_kwargs"):
-            if key in raw:
-                v = raw.pop(key) or {}
+            raise TrainConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
+                                   f"{sorted(own)} and the PPO keywords {sorted(ppo_keys)}")
+        values: dict[str, Any] = {}
+        for key in own & set(raw):
+            v = raw.pop(key)
+            if key == "normalize":
+                v = _normalize(v)
+            elif key == "policy_kwargs":
+                resolve_policy_kwargs(v)  # validate now
+            elif key in ("env_kwargs", "eval_env_kwargs"):
+                v = v or {}
                 if not isinstance(v, Mapping):
-                    raise ValueError(f"{key} must be a mapping (got {v!r})")
-                setattr(cfg, key, dict(v))
-        if "eval_freq" in raw:
-            cfg.eval_freq = _int("eval_freq", raw.pop("eval_freq"), 0)
-        if "eval_episodes" in raw:
-            cfg.eval_episodes = _int("eval_episodes", raw.pop("eval_episodes"), 1)
-        if "eval_seed" in raw:
-            cfg.eval_seed = _int("eval_seed", raw.pop("eval_seed"), 0)
-        if "checkpoint_freq" in raw:
-            cfg.checkpoint_freq = _int("checkpoint_freq", raw.pop("checkpoint_freq"), 0)
-        if "bootstrap_truncated" in raw:
-            v = raw.pop("bootstrap_truncated")
-            if not isinstance(v, bool):
-                raise ValueError(f"bootstrap_truncated must be true or false (got {v!r})")
-            cfg.bootstrap_truncated = v
+                    raise TrainConfigError(f"{where}: field {key!r} must be a mapping (got "
+                                           f"{v!r})")
+                v = dict(v)
+            else:
+                v = check(where, key, v, table[key], TrainConfigError)
+            values[key] = v
+        if "policy" in values:
+            values["policy"] = POLICY_NAMES[values["policy"]]
         for key in ("learning_rate", "clip_range"):
             if key in raw:
                 _schedule(key, raw[key])
-        cfg.hyperparams = raw
-        return cfg
+        return cls(env_id=env_id, hyperparams=raw, source=str(source), **values)
 
     def with_overrides(self, **changes: Any) -> "TrainConfig":
         """A copy with top-level keys or PPO hyperparameters replaced (validated again)."""
         raw = self.to_mapping()
+        raw.update(self.abb_gym_settings())
         for key, value in changes.items():
             if key in ("env_kwargs", "eval_env_kwargs") and isinstance(value, Mapping):
                 raw[key] = {**raw.get(key, {}), **value}
@@ -264,17 +259,27 @@ class TrainConfig:
         return TrainConfig.from_mapping(self.env_id, raw, self.source)
 
     def to_mapping(self) -> dict[str, Any]:
-        """The zoo-style mapping of this config (what ``config.yml`` stores under the id)."""
-        d = asdict(self)
-        out: dict[str, Any] = {k: d[k] for k in ("n_envs", "n_timesteps", "policy")}
-        out["normalize"] = d["normalize"] if d["normalize"] is not None else False
-        if d["policy_kwargs"] is not None:
-            out["policy_kwargs"] = d["policy_kwargs"]
-        out.update(d["hyperparams"])
-        for k in ("env_kwargs", "eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
-                  "checkpoint_freq", "bootstrap_truncated"):
-            out[k] = d[k]
+        """The zoo-compatible entry of this config (what ``config.yml`` stores under the id)."""
+        out: dict[str, Any] = {"n_envs": self.n_envs, "n_timesteps": self.n_timesteps,
+                               "policy": self.policy}
+        out["normalize"] = (f"dict({', '.join(f'{k}={v!r}' for k, v in self.normalize.items())})"
+                            if self.normalize is not None else False)
+        if self.policy_kwargs is not None:
+            out["policy_kwargs"] = zoo_policy_kwargs(self.policy_kwargs)
+        out.update(copy.deepcopy(self.hyperparams))
+        out["env_kwargs"] = copy.deepcopy(self.env_kwargs)
         return out
+
+    def abb_gym_settings(self) -> dict[str, Any]:
+        """The ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know."""
+        return {"eval_env_kwargs": copy.deepcopy(self.eval_env_kwargs),
+                "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
+                "eval_seed": self.eval_seed, "checkpoint_freq": self.checkpoint_freq,
+                "bootstrap_truncated": self.bootstrap_truncated}
+
+    def to_file_data(self) -> dict[str, Any]:
+        """The whole file: the zoo entry under the id and the ``_abb_gym`` section."""
+        return {self.env_id: self.to_mapping(), ABB_GYM_SECTION: self.abb_gym_settings()}
 
     def ppo_kwargs(self) -> dict[str, Any]:
         """Keyword arguments for ``PPO(...)`` (schedules and activation functions resolved)."""
@@ -286,29 +291,29 @@ class TrainConfig:
         return kw
 
 
+__doc__ = __doc__.replace("{table}", fields_table(
+    TrainConfig, [n for n in specs(TrainConfig) if n not in ("env_id", "hyperparams",
+                                                              "source")], title="key"))
+
+
 def load_config(name_or_path: str | os.PathLike, env_id: str | None = None) -> TrainConfig:
-    """Read ``env_id``'s entry of a zoo-style YAML file (by path or name in ``configs/ppo``)."""
+    """Read ``env_id``'s entry of a config file (by path or name on the search path)."""
     path = config_path(name_or_path)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ValueError(f"PPO config {str(path)!r} is not valid YAML: {exc}") from None
-    if not isinstance(data, Mapping):
-        raise ValueError(f"PPO config {str(path)!r} must map environment ids to "
-                         f"hyperparameters")
+    data = read_yaml(path, "PPO config", TrainConfigError)
+    extra = data.get(ABB_GYM_SECTION)
     data = {k: v for k, v in data.items() if not str(k).startswith("_")}  # _run: metadata
     if not data:
-        raise ValueError(f"PPO config {str(path)!r} must map environment ids to "
-                         f"hyperparameters")
+        raise TrainConfigError(f"PPO config {str(path)!r} must map environment ids to "
+                               f"hyperparameters")
     if env_id is None:
         if len(data) != 1:
-            raise ValueError(f"PPO config {str(path)!r} holds several ids {sorted(data)}; "
-                             f"choose one with --env")
+            raise TrainConfigError(f"PPO config {str(path)!r} holds several ids "
+                                   f"{sorted(data)}; choose one with --env")
         env_id = next(iter(data))
     if env_id not in data:
-        raise ValueError(f"PPO config {str(path)!r} has no entry for {env_id!r}; it has "
-                         f"{sorted(data)}")
-    return TrainConfig.from_mapping(env_id, data[env_id], str(path))
+        raise TrainConfigError(f"PPO config {str(path)!r} has no entry for {env_id!r}; it has "
+                               f"{sorted(data)}")
+    return TrainConfig.from_mapping(env_id, data[env_id], str(path), extra)
 
 
 def eval_env_kwargs(cfg: TrainConfig) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["run_episodes", "summarize", "brief", "KEY_METRICS"]
+__all__ = ["run_episodes", "brief", "KEY_METRICS"]
 
 KEY_METRICS = ("return", "time_to_speed", "residual_vibration", "peak_whirl", "balanced")
 
@@ -41,12 +41,7 @@ def run_episodes(policy: Any, env_id: str, *, episodes: int = 64, seed: int = 0,
     return out
 
 
-def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means with 95 % confidence intervals (:func:`abb_gym.evaluation.evaluate.summarise`)."""
-    from ..evaluation.evaluate import summarise
-    return summarise(episodes)
-
-
 def brief(summary: dict[str, Any]) -> dict[str, float]:
-    """The means of :data:`KEY_METRICS` from a :func:`summarize` result (flat, for logs)."""
+    """The means of :data:`KEY_METRICS` from a
+    :func:`abb_gym.evaluation.evaluate.summarise` result (flat, for logs)."""
     return {k: float(summary[k]["mean"]) for k in KEY_METRICS if k in summary}

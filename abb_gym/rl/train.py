@@ -1,6 +1,7 @@
 """Train Stable-Baselines3 PPO on a balancer environment from a zoo-style config.
 
-``abb-gym train`` and ``agents/train.py`` call :func:`main`; library code calls :func:`train`.
+Library code calls :func:`train`; the command line (``abb-gym train``, ``agents/train.py``)
+is :mod:`abb_gym.cli.train`.
 
 What one run does:
 
@@ -37,7 +38,6 @@ at the end and stored in ``config.yml``.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
@@ -47,18 +47,19 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import yaml
 
-from .config import (TrainConfig, eval_env_kwargs, load_config,
+from .config import (TrainConfig, eval_env_kwargs,
                      make_sb3_env, policy_env_fields)
-from .policy import PPOPolicy
-from .rollout import KEY_METRICS, brief, run_episodes, summarize
+from .agent import PPOPolicy
+from ..evaluation.evaluate import summarise
+from .rollout import KEY_METRICS, brief, run_episodes
 
-__all__ = ["train", "RunResult", "FrozenNormalizer", "TestSetEvalCallback", "main",
-           "run_from_args", "config_from_args"]
+__all__ = ["train", "RunResult", "FrozenNormalizer", "TestSetEvalCallback", "train_trial",
+           "seeded_trial", "default_run_dir"]
 
 
 
@@ -72,7 +73,7 @@ def evaluate_model(model, env_id: str, env_kwargs: dict[str, Any], meta: dict[st
     records = run_episodes(policy, env_id, episodes=episodes, seed=seed,
                            scene=kw.pop("scene", "yoshida_odd"), preset=kw.pop("preset", "test"),
                            **kw)
-    return summarize(records), records
+    return summarise(records), records
 
 
 class FrozenNormalizer:
@@ -245,7 +246,7 @@ def _repo_relative(path: str) -> str:
 
 
 def write_config(run_dir: Path, cfg: TrainConfig, meta: dict[str, Any]) -> None:
-    data = {cfg.env_id: _yaml_safe(cfg.to_mapping()), "_run": _yaml_safe(meta)}
+    data = {**_yaml_safe(cfg.to_file_data()), "_run": _yaml_safe(meta)}
     (run_dir / "config.yml").write_text(yaml.safe_dump(data, sort_keys=False))
 
 
@@ -291,7 +292,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     }
     write_config(run_dir, cfg, meta)
 
-    from .policies import POLICIES
+    from .networks import POLICIES
     model = PPO(POLICIES[cfg.policy], env, seed=int(seed), device="cpu", verbose=verbose, **ppo_kw)
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
@@ -328,58 +329,10 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
 
 # ---------------------------------------------------------------------- command line
-def _parse_value(text: str) -> Any:
-    return yaml.safe_load(text)
-
-
-def _pairs(items: Sequence[str] | None, what: str) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for item in items or ():
-        if "=" not in item:
-            raise ValueError(f"{what} must look like KEY=VALUE (got {item!r})")
-        k, v = item.split("=", 1)
-        out[k.strip()] = _parse_value(v)
-    return out
-
-
-def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    cfg = load_config(args.config, args.env)
-    changes: dict[str, Any] = _pairs(args.hyperparams, "--hyperparams")
-    if args.n_timesteps is not None:
-        changes["n_timesteps"] = int(args.n_timesteps)
-    if args.n_envs is not None:
-        changes["n_envs"] = args.n_envs
-    if args.eval_freq is not None:
-        changes["eval_freq"] = args.eval_freq
-    if args.eval_episodes is not None:
-        changes["eval_episodes"] = args.eval_episodes
-    if args.checkpoint_freq is not None:
-        changes["checkpoint_freq"] = args.checkpoint_freq
-    env_kw = _pairs(args.env_kwargs, "--env-kwargs")
-    if env_kw:
-        changes["env_kwargs"] = env_kw
-    return cfg.with_overrides(**changes) if changes else cfg
-
-
-def _report(res: RunResult) -> None:
-    print(f"run folder: {res.run_dir}")
-    print(f"wall time {res.wall_time_s:.1f} s, {res.env_steps} env steps, "
-          f"{res.env_steps_per_s:.0f} env-steps/s (evaluations included)")
-    s = res.evaluation
-    if s:
-        def fmt(key: str, digits: int = 3) -> str:
-            m = s[key]
-            return (f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, "
-                    f"{m['ci_high']:.{digits}f}]")
-        print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
-              f"residual vibration {fmt('residual_vibration')} W_r/e, time to speed "
-              f"{fmt('time_to_speed', 2)} s, balanced {fmt('balanced', 2)}")
-
-
 def train_trial(config: dict) -> dict:
     """Trainable for :func:`abb_gym.execution.tune.run_trials` (one seed of a config)."""
     cfg = TrainConfig.from_mapping(config["env_id"], config["hyperparams"],
-                                   config.get("source", ""))
+                                   config.get("source", ""), config.get("settings"))
     res = train(cfg, seed=int(config["seed"]), run_dir=config["run_dir"], progress=False)
     out = dict(brief(res.evaluation)) if res.evaluation else {}
     out.update({"wall_time_s": res.wall_time_s, "env_steps_per_s": res.env_steps_per_s,
@@ -387,54 +340,8 @@ def train_trial(config: dict) -> dict:
     return _yaml_safe(out)
 
 
-def run_from_args(args: argparse.Namespace) -> int:
-    cfg = config_from_args(args)
-    if args.seeds is None:
-        res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
-                    verbose=args.verbose)
-        _report(res)
-        return 0
-    seeds = list(dict.fromkeys(args.seeds))
-    root = Path(args.out) if args.out else default_run_dir(cfg, 0).parent / time.strftime(
-        "seeds-%Y%m%d-%H%M%S")
-    if args.ray or args.ray_address:
-        from ..execution import Executor
-        from ..execution.tune import grid, run_trials
-        space = {"env_id": cfg.env_id, "hyperparams": cfg.to_mapping(),
-                 "source": cfg.source, "seed": grid(seeds), "run_dir": str(root)}
-        trials = run_trials(_seeded_trial, space,
-                            executor=Executor(ray=True, ray_address=args.ray_address,
-                                              workers=args.workers, progress=False),
-                            metric="return", mode="max", resources_per_trial={"cpu": 2},
-                            name="abb_gym_ppo")
-        for t in trials:
-            print(f"seed {t.config['seed']}: {t.metrics}")
-        return 0
-    if args.workers not in (None, 1):
-        raise ValueError("--workers applies to --ray runs; local seeds train one after the "
-                         "other (each run already uses the machine's cores)")
-    for s in seeds:
-        res = train(cfg, seed=s, run_dir=root / f"s{s}", progress=not args.no_progress,
-                    verbose=args.verbose)
-        _report(res)
-    return 0
-
-
-def _seeded_trial(config: dict) -> dict:
+def seeded_trial(config: dict) -> dict:
     """Trainable: one seed, run folder ``<run_dir>/s<seed>``."""
     config = dict(config)
     config["run_dir"] = str(Path(config["run_dir"]) / f"s{config['seed']}")
     return train_trial(config)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``agents/train.py`` entry point (same options as ``abb-gym train``)."""
-    from ..cli.train import add_train_arguments
-    p = argparse.ArgumentParser(prog="train", description=__doc__.split("\n")[0])
-    add_train_arguments(p)
-    args = p.parse_args(argv)
-    try:
-        return run_from_args(args)
-    except ValueError as exc:
-        print(f"train: error: {exc}", file=sys.stderr)
-        return 2

@@ -66,4 +66,4 @@ class BoundedMlpPolicy(ActorCriticPolicy):
         return data
 
 
-POLICIES = {"MlpPolicy": "MlpPolicy", "BoundedMlpPolicy": BoundedMlpPolicy}
+POLICIES = {"MlpPolicy": "MlpPolicy", "abb_gym.rl.networks.BoundedMlpPolicy": BoundedMlpPolicy}

@@ -10,7 +10,7 @@
                          environment settings (``policy_env``)
 
 and returns a :class:`PPOPolicy`, which implements the evaluation ``Policy`` protocol of
-:mod:`abb_gym.evaluation.policies` (``reset(env, mask)``, ``act(obs, info)``) on a native
+:mod:`abb_gym.evaluation.registry` (``reset(env, mask)``, ``act(obs, info)``) on a native
 vector environment.  The VecNormalize statistics are frozen (``training=False,
 norm_reward=False``): evaluation never updates them.  Actions are the deterministic policy
 mean unless ``deterministic=False``.
@@ -32,27 +32,31 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 __all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
 
 
 def trained_dir() -> Path:
-    """Folder of the shipped agents: ``agents/trained`` of the repository."""
-    return Path(__file__).resolve().parents[2] / "agents" / "trained"
+    """Folder of the shipped agents (``agents/trained``; package data in a wheel)."""
+    from .. import resources
+    return resources.shipped_folder("agents")
 
 
 def resolve_agent_path(path: str | Path) -> Path:
-    """A run folder from a path (folder or its ``model.zip``) or a shipped agent's name."""
+    """A run folder from a path (folder or its ``model.zip``) or an agent's name on the search
+    path of :mod:`abb_gym.resources` (user folders first, then the shipped agents)."""
+    from .. import resources
     p = Path(path)
     if p.is_file() and p.suffix == ".zip":
         p = p.parent
-    if not p.exists() and (trained_dir() / str(path)).exists():
-        p = trained_dir() / str(path)
-    if not (p / "model.zip").exists():
-        shipped = sorted(d.name for d in trained_dir().glob("*") if (d / "model.zip").exists())
+    if not (p / "model.zip").is_file():
+        found = resources.find("agents", str(path))
+        if found is not None:
+            p = found
+    if not (p / "model.zip").is_file():
         raise ValueError(f"no PPO agent at {str(path)!r}: expected a folder with model.zip "
-                         f"(a run folder) or a shipped agent name, one of {shipped}")
+                         f"(a run folder) or an agent name, one of "
+                         f"{resources.names('agents')}")
     return p
 
 
@@ -193,10 +197,14 @@ def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, 
     """
     from stable_baselines3 import PPO
 
+    from ..configuration import read_yaml
+    from .networks import BoundedMlpPolicy
+
     folder = resolve_agent_path(path)
     cfg_path = folder / "config.yml"
-    config = yaml.safe_load(cfg_path.read_text()) if cfg_path.exists() else {}
-    config = dict((config or {}).get("_run") or {})
+    data = read_yaml(cfg_path, "agent config") if cfg_path.exists() else {}
+    config = dict(data.get("_run") or {})
+    entry = data.get(config.get("env_id")) or {}
     trained_id = config.get("env_id")
     if env_id is not None and trained_id is not None and env_id != trained_id:
         raise ValueError(f"agent {str(folder)!r} was trained on {trained_id}, not {env_id}")
@@ -210,11 +218,16 @@ def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, 
     norm_file = folder / ("best_vecnormalize.pkl" if best else "vecnormalize.pkl")
     if not model_file.exists():
         raise ValueError(f"{str(model_file)!r} does not exist")
-    model = PPO.load(model_file, device="cpu")
+    # the network class by its current name (agents of the first wave pickled an older
+    # module path for it)
+    custom = ({"policy_class": BoundedMlpPolicy}
+              if str(entry.get("policy", "")).endswith("BoundedMlpPolicy") else None)
+    model = PPO.load(model_file, device="cpu", custom_objects=custom)
     vn = _load_vecnormalize(norm_file)
     return PPOPolicy(model, vn, config, name=name or f"ppo:{folder.name}",
                      deterministic=deterministic)
 
 
-def _loader(arg: str, env_id: str | None = None, scene: Any = None, **_: Any) -> PPOPolicy:
+def load_ppo(arg: str, env_id: str | None = None, scene: Any = None, **_: Any) -> PPOPolicy:
+    """The policy of ``ppo:NAME|PATH`` (the ``abb_gym.policies`` entry point)."""
     return load_policy(arg, env_id=env_id, scene=scene)

@@ -1,4 +1,5 @@
-"""Hand-designed baselines as policies of the environments (see :mod:`.policies`).
+"""Hand-designed baselines as policies of the environments (the policy protocol of
+:mod:`abb_gym.evaluation.registry`).
 
 * RunUpSpeed: each interval commands the constant acceleration that lands the rotor exactly on
   the profile's speed at the end of the interval, ``a = (w_ref(t + dt) - w) / dt``, in units
@@ -11,41 +12,42 @@
 
 ``BaselinePolicy`` holds one profile per sub-environment, so one vector environment can sweep
 a baseline family over its parameters.  Baseline parameters come from the family defaults
-(Yoshida's scaling rule), from ``configs/baselines/<scene>.yaml`` (the tuner's result) when it
-exists, or explicitly.
+(Yoshida's scaling rule), from ``baselines/<scene>.yaml`` on the search path of
+:mod:`abb_gym.resources` (the tuner's result; a user folder first, then the shipped
+``configs/baselines``) when it exists, or explicitly.  ``baseline:NAME`` policy strings
+resolve through :func:`load_baseline` (registered as an ``abb_gym.policies`` entry point).
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-import yaml
 
-from ..baselines import profiles
+from .. import resources
+from ..configuration import read_yaml
+from ..envs.actions import dwell_action
 from ..physics.drives import SpeedProfile
+from ..physics.rotor import spinning_inertia
 from ..physics.scene import Scene
-from .policies import register_loader
+from . import profiles
 
-BASELINES_DIR = Path(__file__).resolve().parents[2] / "configs" / "baselines"
+__all__ = ["BaselinePolicy", "tuned_parameters", "tuned_file", "make_baseline",
+           "load_baseline", "dwell_action"]
+
+
+def tuned_file(scene_name: str):
+    """The tuned-parameter file of a scene on the search path, or None."""
+    return resources.find("baselines", scene_name)
 
 
 def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
-    """Tuned parameters of ``family`` for a scene from ``configs/baselines/<scene>.yaml``."""
-    path = BASELINES_DIR / f"{scene_name}.yaml"
-    if not path.exists():
+    """Tuned parameters of ``family`` for a scene from ``baselines/<scene>.yaml``."""
+    path = tuned_file(scene_name)
+    if path is None:
         return None
-    data = yaml.safe_load(path.read_text()) or {}
+    data = read_yaml(path, "tuned baselines")
     entry = (data.get("families") or {}).get(family)
     return dict(entry["params"]) if entry and "params" in entry else None
-
-
-def spinning_inertia(scene: Scene) -> float:
-    """Polar inertia [kg m^2] of the rotor with the balls rolling along at the race."""
-    a = scene.arrays()
-    ball_spin = a["ball_inertia_factor"] * a["ball_mass"] * a["ball_radius"] ** 2
-    return scene.rotor_polar_inertia + float(np.sum(ball_spin + a["ball_mass"]
-                                                    * scene.race_radius ** 2))
 
 
 class BaselinePolicy:
@@ -87,29 +89,6 @@ class BaselinePolicy:
         return np.clip(u, -1.0, 1.0).astype(np.float32)[:, None]
 
 
-def dwell_action(setup, profile: SpeedProfile) -> np.ndarray:
-    """The DwellProfile action that encodes ``profile``'s dwell (inverse of its mapping).
-
-    The profile must be ramp - dwell - ramp at the environment's run-up acceleration; other
-    shapes raise ValueError."""
-    dw = setup.config.dwell
-    segs = profile.segments
-    alpha = setup.dwell_acceleration
-    if len(segs) < 2 or abs(segs[0][1] - alpha) > 1e-9 * alpha:
-        raise ValueError("a DwellProfile action needs a ramp at the environment's run-up "
-                         f"acceleration {alpha:g} rad/s^2 followed by a dwell")
-    w_s = segs[0][0] * alpha
-    t_c, a_c = segs[1]
-
-    def unlerp(rng, v):
-        return 2.0 * (v - rng[0]) / (rng[1] - rng[0]) - 1.0
-
-    a = np.array([unlerp(dw.speed_range, w_s / setup.scene.critical_speed),
-                  unlerp(dw.time_range, t_c / setup.nominal_runup_time),
-                  unlerp(dw.accel_range, a_c / alpha)])
-    return np.clip(a, -1.0, 1.0).astype(np.float32)
-
-
 def make_baseline(family: str, scene: Scene, operating_speed: float | None = None,
                   params: Mapping[str, Any] | None = None, use_tuned: bool = True
                   ) -> BaselinePolicy:
@@ -145,10 +124,9 @@ class _LazyBaseline:
         return self._inner.act(obs, info)
 
 
-def _load_baseline(name: str, env_id: str, scene: Any) -> _LazyBaseline:
+def load_baseline(name: str, env_id: str | None = None, scene: Any = None, **_: Any
+                  ) -> _LazyBaseline:
+    """The policy of ``baseline:NAME`` (the ``abb_gym.policies`` entry point)."""
     if name not in profiles.FAMILIES:
         raise ValueError(f"unknown baseline {name!r}; available: {', '.join(profiles.FAMILIES)}")
     return _LazyBaseline(name, scene)
-
-
-register_loader("baseline", _load_baseline)

@@ -1,0 +1,107 @@
+"""The ``info`` dictionary of the environments, built in one place for single and vector.
+
+:func:`step_info` reads one row (the single environment: scalars) or every row (the vector
+environment: arrays, to which :func:`masked` adds gymnasium's ``_key`` masks).  The keys
+are documented in :mod:`abb_gym.envs.base` (Info).
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_K, S_NSETTLE, S_PEAK, S_REACHED,
+                     S_T_REACH, TERM_COLUMNS, TERM_NAMES)
+
+__all__ = ["step_info", "masked", "episode_info"]
+
+# key -> (buffer, column, conversion): the one definition of every per-step key
+#   "value": the entry; "bool": entry != 0; "times_dt": entry x control interval [s];
+#   "per_length": entry / the episode's reference length (Yoshida's W_r / e)
+STEP_KEYS = {
+    "time": ("st", S_K, "times_dt"),
+    "rotor_speed": ("s", "rotor_speed", "value"),
+    "whirl_radius": ("out", O_R, "value"),
+    "whirl_ratio": ("out", O_R, "per_length"),
+    "vibration_radius": ("out", O_RDYN, "value"),
+    "peak_whirl_radius": ("st", S_PEAK, "value"),
+    "ball_angles": ("s", "ball_angles", "value"),
+    "run_up_finished": ("st", S_REACHED, "bool"),
+    "time_to_speed": ("st", S_T_REACH, "value"),
+    "time_at_speed": ("st", S_NSETTLE, "times_dt"),
+    "balanced": ("out", O_BAL, "bool"),
+    "residual_imbalance_ratio": ("out", O_IMB, "value"),
+}
+
+
+def _state_column(name: str, nq: int):
+    return nq + 2 if name == "rotor_speed" else slice(3, nq)
+
+
+def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len) -> dict[str, Any]:
+    """The per-step keys from the buffers ``out``, ``st``, ``s``: pass one row (1-D views:
+    the single environment gets Python scalars) or every row (2-D: arrays over rows)."""
+    nq = 3 + setup.scene.ball_count
+    dt = setup.control_interval
+    single = out.ndim == 1
+    # one row: Python lists (much cheaper to read than numpy scalars); all rows: columns
+    bufs = {"out": out.tolist(), "st": st.tolist()} if single else {"out": out.T, "st": st.T}
+    info: dict[str, Any] = {"reward_terms": {name: (bufs["out"][col] if single
+                                                    else out[:, col].copy())
+                                             for name, col in zip(TERM_NAMES, TERM_COLUMNS)}}
+    for key, (buf, col, conv) in STEP_KEYS.items():
+        if buf == "s":
+            c = _state_column(col, nq)
+            v = s[..., c].copy() if isinstance(c, slice) or not single else float(s[c])
+        else:
+            v = bufs[buf][col]
+            if not single:
+                v = v.copy()
+        if conv == "bool":
+            v = v != 0.0
+        elif conv == "times_dt":
+            v = v * dt
+        elif conv == "per_length":
+            v = v / ref_len
+        info[key] = v
+    code = bufs["out"][O_FCODE]
+    if single:
+        if code:
+            info["failure"] = setup.failure_message(int(code), out, st, s)
+    elif code.any():
+        msgs = np.full(code.shape[0], None, dtype=object)
+        for i in np.flatnonzero(code):
+            msgs[i] = setup.failure_message(int(code[i]), out[i], st[i], s[i])
+        info["failure"] = msgs
+    return info
+
+
+def episode_info(episodes: Sequence, rows) -> dict[str, np.ndarray]:
+    """The episode parameters (:meth:`abb_gym.envs.setup.Episode.as_info`) of ``rows``, as
+    arrays over all rows (other rows hold 0)."""
+    n = len(episodes)
+    per_row = {int(i): episodes[i].as_info() for i in rows}
+    info: dict[str, np.ndarray] = {}
+    for key, first in next(iter(per_row.values())).items():
+        arr = np.zeros((n,) + np.shape(first))
+        for i, values in per_row.items():
+            arr[i] = values[key]
+        info[key] = arr
+    return info
+
+
+def masked(info: dict[str, Any], mask: np.ndarray,
+           masks: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+    """Add gymnasium's ``_key`` masks: ``masks[key]`` where given, else ``mask``
+    (``failure`` is masked by the rows that failed)."""
+    masks = masks or {}
+    out: dict[str, Any] = {}
+    for key, value in info.items():
+        if isinstance(value, dict):
+            value = masked(value, mask)
+        out[key] = value
+        if key == "failure":
+            out["_failure"] = np.array([v is not None for v in value])
+        else:
+            out["_" + key] = masks.get(key, mask).copy()
+    return out

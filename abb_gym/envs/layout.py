@@ -1,0 +1,37 @@
+"""Array layouts shared by the compiled environment step and its Python side.
+
+Every environment keeps its state in preallocated arrays with one row per environment
+(:class:`abb_gym.envs.setup.Buffers`); these are their columns.
+
+* ``cfg`` (``N_CFG``): constants of the environment (``C_*``), the same for every row;
+* ``st`` (``N_ST``): per-environment episode bookkeeping (``S_*``);
+* ``out`` (``N_OUT``): per-step outputs (``O_*``): reward terms, flags, whirl, balance.
+"""
+from __future__ import annotations
+
+# ---------------------------------------------------------------- cfg: environment constants
+(C_KIND, C_DT, C_WOP, C_TOL, C_OVERSPEED, C_TLIM, C_AMAX, C_CLEAR, C_VSCALE, C_FILT,
+ C_NSETTLE, C_NMAX, C_BACKSTOP, C_TREF, C_WV, C_WT, C_WE, C_WR, C_WF, C_NACT, C_OBS_BALLS,
+ C_SPEED_LO, C_SPEED_HI, C_VIB_HI, C_BAL_TOL, C_TEP, C_METHOD) = range(27)
+N_CFG = 27
+# ---------------------------------------------------------------- st: per-environment state
+(S_K, S_FILT, S_NSETTLE, S_REACHED, S_T_REACH, S_RES_SUM, S_PEAK, S_DONE, S_TERM, S_TRUNC,
+ S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX, S_NSEG, S_J, S_PEN_RATE, S_PEN_TERM, S_XS, S_YS,
+ S_ACT) = range(22)
+N_ST = S_ACT + 3  # up to three action entries
+# ---------------------------------------------------------------- out: per-step outputs
+(O_REWARD, O_VIB, O_TIME, O_EFFORT, O_RESID, O_FAIL, O_TERM, O_TRUNC, O_FCODE, O_FTIME,
+ O_FINDEX, O_R, O_RDYN, O_IMB, O_BAL, O_ACTFLAG, O_STEPS, O_WINT, O_WMAX, O_WXS,
+ O_WYS) = range(21)
+N_OUT = 21
+TERM_NAMES = ("vibration", "time", "effort", "residual", "failure")
+TERM_COLUMNS = (O_VIB, O_TIME, O_EFFORT, O_RESID, O_FAIL)
+
+FAIL_NONE = 0
+FAIL_NUMERICAL = 1
+FAIL_CLEARANCE = 2
+FAIL_OVERSPEED = 3
+
+ACT_OK = 0
+ACT_CLIPPED = 1
+ACT_NONFINITE = 2

@@ -1,0 +1,348 @@
+"""The Python side of an environment: preset, spaces, constants, episodes and buffers.
+
+:class:`EnvSetup` resolves the scene and the preset, builds the spaces and the constants array
+``cfg`` of the compiled step (:mod:`abb_gym.envs.kernel`), draws each episode from the
+environment's ``np_random`` (:meth:`EnvSetup.draw_episode`) and writes its row
+(:meth:`EnvSetup.write_episode`).  What an action means is the action model's
+(:mod:`abb_gym.envs.actions`); the machine's facts (reference amplitudes, best residual,
+static sag) come from :mod:`abb_gym.physics.rotor`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+from gymnasium import spaces
+
+from ..physics import batch
+from ..physics import drive_law as dl
+from ..physics import integrators as integ
+from ..physics import model as mdl
+from ..physics import rotor
+from ..physics.scene import Scene, load_scene
+from ..physics.simulate import default_step, state_names
+from .actions import ActionModel, action_model
+from .config import EnvConfig, PresetError, load_preset
+from .kernel import observe_rows
+from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_CLEAR, C_DT, C_FILT, C_KIND, C_METHOD,
+                     C_NACT, C_NMAX, C_NSETTLE, C_OBS_BALLS, C_OVERSPEED, C_SPEED_HI,
+                     C_SPEED_LO, C_TEP, C_TLIM, C_TOL, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF,
+                     C_WOP, C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED,
+                     N_CFG, N_OUT, N_ST, O_FINDEX, O_FTIME, S_AOP, S_AREF, S_DONE, S_DTMAX,
+                     S_NSEG, S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_XS, S_YS)
+
+__all__ = ["EnvSetup", "Episode", "Buffers", "RESET_OPTIONS", "SetupAccess"]
+
+
+@dataclass
+class Episode:
+    """Parameters of one episode (drawn by :meth:`EnvSetup.draw_episode`)."""
+
+    scene: Scene
+    imbalance: float
+    imbalance_phase: float
+    ball_angles: np.ndarray
+    ball_drag_scale: float
+    rolling_resistance_scale: float
+    integration_step: float
+    static_deflection: tuple[float, float] = (0.0, 0.0)
+
+    def as_info(self) -> dict[str, Any]:
+        return {"imbalance": self.imbalance, "imbalance_phase": self.imbalance_phase,
+                "initial_ball_angles": self.ball_angles.copy(),
+                "ball_drag_scale": self.ball_drag_scale,
+                "rolling_resistance_scale": self.rolling_resistance_scale,
+                "integration_step": self.integration_step,
+                "static_deflection": np.array(self.static_deflection)}
+
+
+RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
+                 "ball_drag_scale", "rolling_resistance_scale")
+
+
+class Buffers:
+    """The preallocated arrays of ``n`` environments (rows)."""
+
+    def __init__(self, setup: "EnvSetup", n: int, n_trace: int = 0):
+        nb = setup.scene.ball_count
+        ns = 2 * (3 + nb)
+        self.act = np.zeros((n, setup.n_actions))
+        self.s = np.zeros((n, ns))
+        self.p = np.zeros((n, mdl.N_PARAMS))
+        self.b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
+        self.d = np.zeros((n, setup.n_rows, dl.N_DRIVE))
+        self.st = np.zeros((n, N_ST))
+        self.st[:, S_DONE] = 1.0
+        self.st[:, S_USCALE] = 1.0
+        self.obs = np.zeros((n, setup.obs_dim), dtype=np.float32)
+        self.out = np.zeros((n, N_OUT))
+        k = setup.max_steps + 1 if n_trace > 0 else 0
+        self.trace = np.zeros((min(n_trace, n), k, 4))
+        self.ws, self.work = batch.make_workspace(n, nb)
+        self.active = np.ones(n, dtype=np.uint8)
+        self.cfg = setup.cfg
+
+    def kernel_args(self) -> tuple:
+        """Arguments of :func:`step_serial` / :func:`step_parallel`, in order."""
+        return (self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs, self.out,
+                self.trace, self.ws, self.work, self.active)
+
+    def observe(self, rows: np.ndarray) -> None:
+        observe_rows(np.asarray(rows, dtype=np.int64), self.s, self.p, self.b, self.st,
+                     self.cfg, self.obs, self.out, self.trace)
+
+
+def _as_int_steps(seconds: float, dt: float) -> int:
+    return max(1, int(math.ceil(seconds / dt - 1e-9)))
+
+
+class EnvSetup:
+    """Everything an environment of one kind, scene and preset shares between episodes."""
+
+    def __init__(self, kind: str, scene: Any = "yoshida_odd", preset: Any = "train",
+                 observe_balls: bool = False, max_episode_steps: int | None = None,
+                 overrides: Mapping[str, Any] | None = None):
+        self.actions: ActionModel = action_model(kind)
+        self.kind = kind
+        if not isinstance(scene, (str, Scene)) and not hasattr(scene, "__fspath__"):
+            raise ValueError(f"scene must be a scene name, a path or a Scene (got {scene!r})")
+        self.scene = load_scene(scene)
+        self.config: EnvConfig = load_preset(preset, **dict(overrides or {}))
+        if not isinstance(observe_balls, (bool, np.bool_)):
+            raise ValueError(f"observe_balls must be True or False (got {observe_balls!r})")
+        self.observe_balls = bool(observe_balls)
+        if max_episode_steps is not None:
+            if isinstance(max_episode_steps, bool) or not isinstance(
+                    max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
+                raise ValueError(f"max_episode_steps must be an integer >= 1 or None "
+                                 f"(got {max_episode_steps!r})")
+        self.backstop = int(max_episode_steps or 0)
+        cfg = self.config
+        sc = self.scene
+        self.operating_speed = float(cfg.operating_speed or sc.drive_operating_speed)
+        self.control_interval = float(cfg.control_interval)
+        self.max_acceleration = float(sc.drive_max_acceleration)
+        self.torque_limit = float(sc.drive_torque_limit)
+        # reference time: the fastest run-up the drive allows
+        self.reference_time = self.operating_speed / self.max_acceleration
+        dw = cfg.dwell
+        self.dwell_acceleration = dw.runup_acceleration * self.max_acceleration
+        self.nominal_runup_time = self.operating_speed / self.dwell_acceleration
+        am = self.actions
+        length = (float(cfg.episode_length) if cfg.episode_length is not None
+                  else am.default_episode_length(self))
+        self.max_steps = _as_int_steps(length, self.control_interval)
+        self.episode_length = self.max_steps * self.control_interval
+        self.settle_steps = int(round(cfg.settle_time / self.control_interval))
+        if cfg.settle_time > 0 and self.settle_steps == 0:
+            self.settle_steps = 1
+        if self.settle_steps >= self.max_steps:
+            raise PresetError(f"environment preset {cfg.name!r}: settle_time = "
+                              f"{cfg.settle_time:g} s must be shorter than the episode "
+                              f"length {self.episode_length:g} s")
+        am.check(self)
+        self.max_speed = am.max_speed(self.operating_speed, cfg)
+        # observation scale: the resonance amplitude of the machine with its balancer off,
+        # with the scene's imbalance
+        self.vibration_scale = rotor.reference_amplitudes(sc, self.operating_speed)[0]
+        self.vibration_bound = sc.housing_clearance / self.vibration_scale
+        self.effort_bound = am.effort_bound(cfg)
+        self.n_actions = am.n_actions
+        self.n_rows = am.n_rows
+        nb = sc.ball_count
+        self.obs_dim = 5 + self.n_actions + (2 * nb if self.observe_balls else 0)
+        speed_lo, speed_hi = am.speed_bounds(cfg)
+        lo = [speed_lo, -self.vibration_bound, -self.vibration_bound, 0.0, 0.0]
+        hi = [speed_hi, self.vibration_bound, self.vibration_bound, self.vibration_bound, 1.0]
+        lo += [-1.0] * self.n_actions + [-1.0] * (self.obs_dim - 5 - self.n_actions)
+        hi += [1.0] * self.n_actions + [1.0] * (self.obs_dim - 5 - self.n_actions)
+        self.observation_space = spaces.Box(np.array(lo, np.float32), np.array(hi, np.float32),
+                                            dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(self.n_actions,), dtype=np.float32)
+        self.obs_names = (["rotor_speed", "vibration_x", "vibration_y", "vibration_amplitude",
+                           "time_fraction"]
+                          + ([f"last_action[{a}]" for a in range(self.n_actions)])
+                          + [f"{fn}(ball_angle[{k}])" for k in range(nb) for fn in ("cos", "sin")
+                             if self.observe_balls])
+        w = cfg.reward
+        c = np.zeros(N_CFG)
+        c[C_KIND] = am.kind_id
+        c[C_DT] = self.control_interval
+        c[C_WOP] = self.operating_speed
+        c[C_TOL] = cfg.at_speed_tolerance
+        c[C_OVERSPEED] = am.overspeed_trip(cfg)
+        c[C_TLIM] = self.torque_limit
+        c[C_AMAX] = self.max_acceleration
+        c[C_CLEAR] = sc.housing_clearance
+        c[C_VSCALE] = self.vibration_scale
+        c[C_FILT] = 1.0 - math.exp(-self.control_interval / cfg.vibration_filter_time)
+        c[C_NSETTLE] = self.settle_steps
+        c[C_NMAX] = self.max_steps
+        c[C_BACKSTOP] = self.backstop
+        c[C_TREF] = self.reference_time
+        c[C_WV], c[C_WT], c[C_WE], c[C_WR], c[C_WF] = (w.vibration, w.time, w.effort,
+                                                       w.residual, w.failure)
+        c[C_NACT] = self.n_actions
+        c[C_OBS_BALLS] = 1.0 if self.observe_balls else 0.0
+        c[C_SPEED_LO], c[C_SPEED_HI] = speed_lo, speed_hi
+        c[C_VIB_HI] = self.vibration_bound
+        c[C_BAL_TOL] = cfg.balance_tolerance
+        c[C_TEP] = self.episode_length
+        c[C_METHOD] = integ.METHOD_IDS[cfg.integrator]
+        self.cfg = c
+        self._state_names = state_names(nb)
+
+    # ------------------------------------------------------------------ episodes
+    def draw_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None
+                     ) -> Episode:
+        """Draw one episode's parameters from ``rng`` (fixed order), then apply ``options``."""
+        sc = self.scene
+        rz = self.config.randomize
+        nb = sc.ball_count
+        cap = sc.balancing_capacity
+        imbalance = sc.imbalance
+        phase = 0.0
+        angles = np.asarray(sc.ball_angles0, dtype=float).copy()
+        drag = 1.0
+        roll = 1.0
+        if rz.imbalance_ratio is not None:
+            imbalance = float(rng.uniform(*rz.imbalance_ratio)) * cap
+        if rz.imbalance_phase is not None:
+            phase = float(rng.uniform(*rz.imbalance_phase))
+        if rz.ball_angles is not None:
+            angles = rng.uniform(rz.ball_angles[0], rz.ball_angles[1], size=nb)
+        if rz.ball_drag_scale is not None:
+            drag = float(rng.uniform(*rz.ball_drag_scale))
+        if rz.rolling_resistance_scale is not None:
+            roll = float(rng.uniform(*rz.rolling_resistance_scale))
+        if options:
+            if not isinstance(options, Mapping):
+                raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)}"
+                                 f" (got {options!r})")
+            unknown = sorted(set(options) - set(RESET_OPTIONS))
+            if unknown:
+                raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
+                                 f"{list(RESET_OPTIONS)}")
+            if "imbalance" in options and "imbalance_ratio" in options:
+                raise ValueError("reset options 'imbalance' and 'imbalance_ratio' exclude "
+                                 "each other")
+            if "imbalance" in options:
+                imbalance = _opt_number("imbalance", options["imbalance"], 0.0, "kg m")
+            if "imbalance_ratio" in options:
+                imbalance = _opt_number("imbalance_ratio", options["imbalance_ratio"], 0.0,
+                                        "-") * cap
+            if "imbalance_phase" in options:
+                phase = _opt_number("imbalance_phase", options["imbalance_phase"], None, "rad")
+            if "ball_angles" in options:
+                a = np.asarray(options["ball_angles"], dtype=float)
+                if a.ndim == 0:
+                    a = np.full(nb, float(a))
+                if a.shape != (nb,) or not np.all(np.isfinite(a)):
+                    raise ValueError(f"reset option 'ball_angles' must be {nb} finite angles "
+                                     f"[rad] (got {options['ball_angles']!r})")
+                angles = a.copy()
+            if "ball_drag_scale" in options:
+                drag = _opt_number("ball_drag_scale", options["ball_drag_scale"], 0.0, "-",
+                                   inclusive=False)
+            if "rolling_resistance_scale" in options:
+                roll = _opt_number("rolling_resistance_scale",
+                                   options["rolling_resistance_scale"], 0.0, "-")
+        changes: dict[str, Any] = {}
+        if imbalance != sc.imbalance:
+            changes["rotor_eccentricity"] = imbalance / sc.rotor_mass
+        if drag != 1.0:
+            changes["ball_drag"] = [v * drag for v in sc.ball_drag]
+        if roll != 1.0:
+            changes["ball_rolling_resistance"] = [v * roll for v in sc.ball_rolling_resistance]
+        ep_scene = sc.replace(**changes) if changes else sc
+        h = self.config.integration_step
+        if h is None:
+            h = default_step(ep_scene, self.max_speed, self.config.integrator)
+        return Episode(ep_scene, float(imbalance), float(phase), angles, float(drag),
+                       float(roll), float(h), rotor.static_deflection(ep_scene))
+
+    def write_episode(self, bufs: Buffers, i: int, ep: Episode) -> None:
+        """Reset row ``i`` of ``bufs`` to the start of episode ``ep`` (rotor at rest)."""
+        sc = ep.scene
+        nb = sc.ball_count
+        nq = 3 + nb
+        p, b = mdl.pack_parameters(sc)
+        bufs.p[i] = p
+        bufs.b[i] = b
+        xs, ys = ep.static_deflection
+        s = bufs.s[i]
+        s[:] = 0.0
+        s[0] = xs
+        s[1] = ys
+        s[2] = ep.imbalance_phase
+        s[3:nq] = ep.ball_angles
+        st = bufs.st[i]
+        st[:] = 0.0
+        st[S_XS] = xs
+        st[S_YS] = ys
+        u_ref = rotor.imbalance_scale(sc)
+        a_peak, a_op = rotor.reference_amplitudes(sc, self.operating_speed)
+        st[S_AREF] = a_peak
+        st[S_AOP] = a_op
+        st[S_USCALE] = u_ref
+        st[S_UBEST] = rotor.best_residual(sc)
+        st[S_DTMAX] = ep.integration_step
+        st[S_NSEG] = 1.0
+        w = self.config.reward
+        clear = sc.housing_clearance
+        st[S_PEN_RATE] = w.vibration * clear / a_peak + w.time + w.effort * self.effort_bound
+        st[S_PEN_TERM] = w.residual * clear / a_op
+        d = bufs.d[i]
+        d[:] = 0.0
+        self.actions.reset_rows(d, ep, self)
+        bufs.act[i] = 0.0
+
+    # ------------------------------------------------------------------ info
+    def failure_message(self, code: int, out_row: np.ndarray, st_row: np.ndarray,
+                        s_row: np.ndarray) -> str:
+        t = out_row[O_FTIME]
+        if code == FAIL_NUMERICAL:
+            name = self._state_names[int(out_row[O_FINDEX])]
+            return (f"numerical: the state became non-finite at t = {t:.6g} s in {name!r} "
+                    f"(RK4 step {st_row[S_DTMAX]:.3g} s); the episode ended at the last "
+                    f"finite state; reduce integration_step")
+        if code == FAIL_CLEARANCE:
+            return (f"clearance: the whirl radius exceeded the housing clearance "
+                    f"{self.scene.housing_clearance:g} m at t = {t:.6g} s")
+        if code == FAIL_OVERSPEED:
+            nq = s_row.shape[0] // 2
+            return (f"overspeed: rotor speed {s_row[nq + 2]:.6g} rad/s beyond "
+                    f"{self.config.overspeed:g} x the operating speed {self.operating_speed:g}"
+                    f" rad/s at t = {t:.6g} s")
+        return ""
+
+
+def _opt_number(name: str, value: Any, lo: float | None, unit: str, inclusive: bool = True
+                ) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"reset option {name!r} must be a number [{unit}] (got {value!r})"
+                         ) from None
+    if not math.isfinite(v) or (lo is not None and (v < lo or (v == lo and not inclusive))):
+        rng = "finite" if lo is None else f"{'>=' if inclusive else '>'} {lo:g}"
+        raise ValueError(f"reset option {name!r} must be {rng} [{unit}] (got {value!r})")
+    return v
+
+
+class SetupAccess:
+    """``scene`` and ``config`` of an environment that holds an :class:`EnvSetup`."""
+
+    setup: EnvSetup
+
+    @property
+    def scene(self) -> Scene:
+        """The environment's nominal scene (episodes may randomise it: ``episode_scene``)."""
+        return self.setup.scene
+
+    @property
+    def config(self) -> EnvConfig:
+        """The resolved preset (:class:`abb_gym.envs.config.EnvConfig`)."""
+        return self.setup.config

@@ -1,0 +1,55 @@
+"""Confidence intervals of evaluation results (95 % unless stated).
+
+* :func:`mean_ci` - mean with a Student-t interval over the finite values; for a metric that
+  cannot be negative (``nonnegative=True``) the interval is clipped at 0, since a negative
+  bound is no possible value.
+* :func:`share_ci` - a share of successes with the Wilson score interval
+  (``scipy.stats.binomtest(...).proportion_ci(method="wilson")``), which stays inside [0, 1]
+  and behaves at 0 and at n successes, where the normal approximation collapses.
+* :func:`paired_difference_ci` - mean and t-interval of per-episode differences of two
+  policies on the same machines (paired: the machine-to-machine spread cancels).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["mean_ci", "share_ci", "paired_difference_ci", "LEVEL"]
+
+LEVEL = 0.95
+
+
+def mean_ci(values, nonnegative: bool = False) -> tuple[float, float, float, int]:
+    """(mean, low, high, n) over the finite ``values``; NaN bounds below two values."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan, math.nan, 0
+    mean = float(v.mean())
+    if v.size < 2:
+        return mean, math.nan, math.nan, int(v.size)
+    half = float(stats.t.ppf(0.5 + LEVEL / 2, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    low = mean - half
+    if nonnegative:
+        low = max(0.0, low)
+    return mean, low, mean + half, int(v.size)
+
+
+def share_ci(successes: int, n: int) -> tuple[float, float, float]:
+    """(share, low, high) of ``successes`` out of ``n`` (Wilson score interval)."""
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    ci = stats.binomtest(int(successes), int(n)).proportion_ci(confidence_level=LEVEL,
+                                                                method="wilson")
+    return successes / n, float(ci.low), float(ci.high)
+
+
+def paired_difference_ci(a, b) -> tuple[float, float, float, int]:
+    """(mean, low, high, n) of ``a - b`` over the pairs where both are finite."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if a.shape != b.shape:
+        raise ValueError(f"paired values need the same episodes (shapes {a.shape} and {b.shape})")
+    return mean_ci(a - b)

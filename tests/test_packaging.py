@@ -1,0 +1,104 @@
+"""Packaging: the wheel carries everything a checkout has.
+
+``test_wheel_installed_outside_the_checkout`` builds the wheel, installs it in a fresh virtual
+environment in a temporary folder (no access to the checkout), and from there makes every
+environment id, evaluates a shipped agent and a tuned baseline with ``abb-gym evaluate``, and
+checks that the tuned parameters were used.  It takes a few minutes (installs and a cold numba
+compile), so it runs with ``--runwheel`` (``make test`` and CI pass it).
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _declared_packages() -> list[str]:
+    import tomllib
+    data = tomllib.loads((REPO / "pyproject.toml").read_text())
+    return data["tool"]["setuptools"]["packages"]
+
+
+def test_every_subpackage_is_declared_in_pyproject():
+    on_disk = sorted(".".join(p.parent.relative_to(REPO).parts)
+                     for p in (REPO / "abb_gym").rglob("__init__.py"))
+    declared = _declared_packages()
+    assert set(on_disk) <= set(declared), f"add to pyproject packages: {set(on_disk) - set(declared)}"
+    data = _declared_packages()
+    assert "abb_gym._shipped.configs" in data and "abb_gym._shipped.agents" in data
+
+
+def test_resources_find_the_checkouts_files_and_user_folders_come_first(tmp_path, monkeypatch):
+    from abb_gym import load_scene, resources
+    assert resources.shipped_folder("scenes") == REPO / "configs" / "scenes"
+    assert "yoshida_odd" in resources.names("scenes")
+    assert resources.find("agents", "runup_speed_yoshida_odd") == \
+        REPO / "agents" / "trained" / "runup_speed_yoshida_odd"
+    user = tmp_path / "mine"
+    (user / "scenes").mkdir(parents=True)
+    text = (REPO / "configs" / "scenes" / "yoshida_odd.yaml").read_text()
+    (user / "scenes" / "my_drive.yaml").write_text(text.replace("name: yoshida_odd",
+                                                                "name: my_drive"))
+    monkeypatch.setenv(resources.ENV_VAR, str(user))
+    assert "my_drive" in resources.names("scenes") and "yoshida_odd" in resources.names("scenes")
+    assert load_scene("my_drive").name == "my_drive"
+    assert resources.find("scenes", "../scenes/x") is None and resources.find("scenes", "") is None
+
+
+def _run(cmd, cwd, env, timeout=900):
+    res = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    assert res.returncode == 0, f"{cmd} failed:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}"
+    return res.stdout
+
+
+@pytest.mark.wheel
+def test_wheel_installed_outside_the_checkout(tmp_path):
+    dist = tmp_path / "dist"
+    _run([sys.executable, "-m", "pip", "wheel", str(REPO), "--no-deps", "-q", "-w", str(dist)],
+         cwd=tmp_path, env=os.environ)
+    wheel = next(dist.glob("abb_gym-*.whl"))
+    venv = tmp_path / "venv"
+    _run([sys.executable, "-m", "venv", str(venv)], cwd=tmp_path, env=os.environ)
+    py = venv / "bin" / "python"
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+    _run([str(py), "-m", "pip", "install", "-q", "-c", str(REPO / "constraints.txt"),
+          f"{wheel}[train]"], cwd=tmp_path, env=env, timeout=1500)
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    script = textwrap.dedent("""
+        import json, gymnasium as gym, numpy as np, abb_gym
+        from abb_gym import resources
+        assert "site-packages" in str(resources.shipped_folder("scenes")), resources.shipped_folder("scenes")
+        out = {"scenes": abb_gym.list_scenes(), "agents": resources.names("agents"), "ids": []}
+        for env_id in abb_gym.envs.ENV_IDS:
+            env = gym.make(env_id)
+            env.reset(seed=0)
+            env.step(env.action_space.sample())
+            out["ids"].append(env_id)
+        print(json.dumps(out))
+    """)
+    made = json.loads(_run([str(py), "-c", script], cwd=work, env=env).strip().splitlines()[-1])
+    assert set(made["scenes"]) == {p.stem for p in (REPO / "configs" / "scenes").glob("*.yaml")}
+    assert set(made["agents"]) == {p.name for p in (REPO / "agents" / "trained").iterdir()
+                                   if (p / "model.zip").exists()}
+    assert len(made["ids"]) == 3
+    _run([str(venv / "bin" / "abb-gym"), "evaluate", "--env", "abb_gym/RunUpSpeed-v0",
+          "--scene", "yoshida_odd", "--policy", "ppo:runup_speed_yoshida_odd",
+          "--policy", "baseline:speed_dwell", "--episodes", "2", "--workers", "1",
+          "--out", str(work / "eval")], cwd=work, env=env)
+    data = json.loads((work / "eval" / "evaluation.json").read_text())
+    names = [p["policy"] for p in data["policies"]]
+    assert names[0] == "ppo:runup_speed_yoshida_odd", names
+    tuned = yaml.safe_load((REPO / "configs" / "baselines" / "yoshida_odd.yaml").read_text())
+    want = tuned["families"]["speed_dwell"]["params"]
+    assert "(tuned)" in names[1], names
+    assert data["policies"][1]["params"] == pytest.approx(want)
