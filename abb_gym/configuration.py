@@ -61,6 +61,7 @@ class Spec:
     doc: str = ""
     yaml: str | None = None  # path in the YAML file ("rotor.mass"); None: the field name
     per_ball: bool = False
+    search: tuple | None = None  # tuners: (low, high, scale name) of the search box
 
 
 def declare(default: Any = MISSING, *, factory: Callable[[], Any] | None = None,

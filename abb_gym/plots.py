@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 
 from .physics.simulate import Trajectory  # noqa: E402
 
-__all__ = ["plot_runup", "plot_runup_comparison"]
+__all__ = ["plot_runup", "plot_runup_comparison", "short_label"]
 
 
 def _draw_runup(axes, tr: Trajectory, label: str | None, colour, critical: bool) -> None:
@@ -31,8 +31,8 @@ def _draw_runup(axes, tr: Trajectory, label: str | None, colour, critical: bool)
                 ax.axvline(tr.t[crossing[0]], color="0.6", lw=0.8, ls=":")
 
 
-def _figure(title: str):
-    fig, (ax_speed, ax_balls) = plt.subplots(2, 1, figsize=(8, 7), sharex=True,
+def _figure(title: str, wide: bool = False):
+    fig, (ax_speed, ax_balls) = plt.subplots(2, 1, figsize=(11 if wide else 8, 7), sharex=True,
                                              constrained_layout=True)
     ax_speed._abb_twin = ax_speed.twinx()
     ax_speed.set_ylabel("rotor speed dpsi/dt [rad/s] (dashed)")
@@ -52,18 +52,38 @@ def plot_runup(tr: Trajectory, path: str | Path, title: str | None = None) -> Pa
     return plot_runup_comparison({"": tr}, path, title)
 
 
+def short_label(name: str, limit: int = 24) -> str:
+    """A legend label of at most ``limit`` characters (the full name goes in the caption)."""
+    return name if len(name) <= limit else name[:limit - 3] + "..."
+
+
 def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
                           title: str | None = None) -> Path:
-    """Several runs of one scene on the same axes (e.g. policy versus baseline) to a PNG."""
+    """Several runs of one scene on the same axes (e.g. policy versus baseline) to a PNG.
+
+    With several runs the legends sit beside the axes (never over the traces); labels longer
+    than 24 characters are shortened there, numbered, and given whole in a caption."""
     runs = dict(runs)
     first = next(iter(runs.values()))
-    fig, axes = _figure(title or f"{first.scene.name}: run-up")
+    several = len(runs) > 1 or any(runs)
+    fig, axes = _figure(title or f"{first.scene.name}: run-up", wide=several)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    caption = []
     for k, (label, tr) in enumerate(runs.items()):
-        _draw_runup(axes, tr, label or None, colours[k % len(colours)], critical=(k == 0))
-    if any(runs):
-        axes[0]._abb_twin.legend(loc="upper right", fontsize=8)
-    axes[1].legend(loc="lower left", fontsize=7, ncol=2)
+        short = short_label(label) if label else label
+        if short != label:
+            short = f"[{k + 1}] {short}"
+            caption.append(f"[{k + 1}] {label}")
+        _draw_runup(axes, tr, short or None, colours[k % len(colours)], critical=(k == 0))
+    if several:
+        axes[0]._abb_twin.legend(loc="upper left", bbox_to_anchor=(1.08, 1.0), fontsize=8,
+                                 borderaxespad=0.0)
+        axes[1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                       borderaxespad=0.0)
+    else:
+        axes[1].legend(loc="lower left", fontsize=7, ncol=2)
+    if caption:  # supxlabel: constrained layout keeps room for it below the axes
+        fig.supxlabel("; ".join(caption), fontsize=7)
     lo = min(np.degrees(tr.ball_angles).min() for tr in runs.values())
     hi = max(np.degrees(tr.ball_angles).max() for tr in runs.values())
     axes[1].set_ylim(min(-200.0, lo - 20), max(30.0, hi + 20))

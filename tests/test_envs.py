@@ -127,7 +127,7 @@ def test_nominal_preset_is_the_scene():
 
 # ------------------------------------------------------------------------ reward
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_reward_terms_add_up(env_id):
+def test_reward_terms_are_reported(env_id):
     env = make(env_id, settle_time=0.05, episode_length=0.6 if "Dwell" not in env_id else None)
     env.reset(seed=7)
     rng = np.random.default_rng(0)
@@ -136,7 +136,6 @@ def test_reward_terms_add_up(env_id):
         obs, r, te, tr, info = env.step(env.action_space.sample())
         terms = info["reward_terms"]
         assert tuple(terms) == TERMS
-        assert r == sum(terms.values())
         seen.update(k for k, v in terms.items() if v != 0.0)
         assert np.all(np.isfinite(obs))
         if te or tr:
@@ -154,10 +153,42 @@ def test_success_pays_residual_and_settles():
         if te or tr:
             break
     assert te and not tr and "failure" not in info
-    assert info["run_up_finished"] and info["reward_terms"]["residual"] < 0
+    assert info["settled"] and info["at_speed"] and info["reward_terms"]["residual"] < 0
     assert info["time_at_speed"] == pytest.approx(0.2)
-    assert 2.9 < info["time_to_speed"] < 3.05  # 240 rad/s at 80 rad/s^2, 1 % tolerance
+    # 240 rad/s at 80 rad/s^2: the speed loop lands on w_op at the end of the interval
+    # that reaches it (3.0 s), which starts the stay; the episode ends 0.2 s later
+    assert info["first_at_speed"] == info["run_up_time"] == pytest.approx(3.0)
+    assert info["time"] == pytest.approx(3.2)
     assert obs[0] == pytest.approx(1.0)
+
+
+def _hold_speed_fraction(fraction: float, seed: int):
+    """RunUpSpeed driven to ``fraction`` x w_op (ramp at the largest acceleration, then hold),
+    on the same machine; returns (return, terminated, last info)."""
+    env = make()
+    env.reset(seed=seed)
+    setup = env.unwrapped.setup
+    target = fraction * setup.operating_speed
+    total = 0.0
+    while True:
+        w = env.unwrapped.state[3 + setup.scene.ball_count + 2]
+        a = np.clip((target - w) / setup.control_interval / setup.max_acceleration, -1, 1)
+        obs, r, te, tr, info = env.step(np.array([a], dtype=np.float32))
+        total += r
+        if te or tr:
+            return total, te, info
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_parking_below_the_operating_speed_never_scores_better(seed):
+    """The first wave's +-1 % band let a profile park at 0.99 w_op and measure its residual
+    there; with the 0.2 % band, holding 0.99 w_op never completes the run-up and pays the
+    residual at its bound, so it scores worse than going to w_op on the same machine."""
+    parked, te_parked, info_parked = _hold_speed_fraction(0.99, seed)
+    full, te_full, info_full = _hold_speed_fraction(1.0, seed)
+    assert te_full and info_full["settled"]
+    assert not te_parked and not info_parked["settled"] and not info_parked["at_speed"]
+    assert parked < full
 
 
 def test_truncation_at_episode_length():

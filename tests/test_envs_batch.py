@@ -63,10 +63,11 @@ def test_advance_reports_nonfinite_and_whirl():
     _, rows = drive.segment_table(10.0)
     p, b = mdl.pack_parameters(sc)
     ws, work = batch.make_workspace(1, 2)
-    whirl = np.zeros(4)  # integral, max, rest position (0, 0)
+    whirl = np.zeros(5)  # integral, max, rest position (0, 0), max from rest
     st, j, t_fail, bad, steps = batch.advance(s, 0.0, 2.6, rows, len(rows), 0, p, b, 1e-3,
                                               ws[0], work[0], whirl, integ.METHOD_RK4)
     assert st == 0 and steps == 2600 and whirl[1] > 0 and 0 < whirl[0] < 2.6 * whirl[1]
+    assert whirl[4] == whirl[1]  # no gravity: the rest position is the bearing axis
     s[4] = np.nan
     st, *_ = batch.advance(s, 2.6, 2.7, rows, len(rows), j, p, b, 1e-3, ws[0], work[0], whirl,
                            integ.METHOD_RK4)

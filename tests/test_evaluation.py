@@ -82,9 +82,10 @@ def test_evaluation_is_deterministic_and_independent_of_chunking():
 def test_summary_confidence_intervals():
     p, lo, hi = share_ci(5, 10)
     assert p == 0.5 and lo == pytest.approx(0.2366, abs=1e-3) and hi == pytest.approx(0.7634, abs=1e-3)
-    eps = [{"time_to_speed": v, "peak_whirl": v, "residual_vibration": v,
-            "ball_settling_time": math.nan, "balanced": v > 1, "nonsynchronous_whirl": False,
-            "drive_energy": v, "return": -v} for v in (1.0, 2.0, 3.0)]
+    from abb_gym.evaluation.evaluate import METRICS
+    eps = [dict({k: v for k in METRICS}, ball_settling_time=math.nan, balanced=v > 1,
+                nonsynchronous_whirl=False, at_speed=True, **{"return": -v})
+           for v in (1.0, 2.0, 3.0)]
     s = summarise(eps)
     assert s["residual_vibration"]["mean"] == 2.0
     # t(0.975, 2) = 4.303, s = 1, n = 3: half width 2.484
@@ -103,24 +104,91 @@ def test_pareto_front():
 
 
 def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
-    r = tuner.tune("yoshida_odd", families=("speed_dwell",), n_first=6, n_second=3,
-                   episodes=4)
-    assert "path" not in r
+    """CMA-ES never returns worse than the default (the default is always a candidate, on
+    the same seeded episodes), writes only where told, and the report carries every metric."""
+    r = tuner.tune("yoshida_odd", families=("speed_dwell", "knots"), budget=12, episodes=4,
+                   popsize=5, progress=False)
+    assert "path" not in r and "CMA-ES" in r["optimiser"]
     path = tuner.write_tuned(r, tmp_path / "baselines")
     assert path == tmp_path / "baselines" / "yoshida_odd.yaml" and path.exists()
     with pytest.raises(ValueError, match="exists; pass --force"):
         tuner.write_tuned(r, path)
     tuner.write_tuned(r, path, force=True)
-    fam = r["families"]["speed_dwell"]
-    assert fam["mean_return"] >= fam["default_mean_return"]
+    for fam in ("speed_dwell", "knots"):
+        entry = r["families"][fam]
+        assert entry["mean_return"] >= entry["default_mean_return"]
+        profiles.build_family(fam, **entry["params"])  # the declared fields validate it
     rows = tuner.sweep("yoshida_odd", families=("ramp",), n=3, episodes=2)
-    assert len(rows) == 3 and all(np.isfinite(r["time_to_speed"]) for r in rows)
+    assert len(rows) == 3 and all(np.isfinite(r["run_up_time"]) for r in rows)
     res = [evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=3, seed=0)]
     paths = write_report(res, tmp_path, rows)
     for key in ("summary", "episodes", "json", "timeseries", "pareto"):
         assert paths[key].exists()
     data = json.loads(paths["json"].read_text())
     assert data["policies"][0]["summary"]["episodes"] == 3
+    for key in ("run_up_time", "first_at_speed", "at_speed", "residual_vibration"):
+        assert key in data["policies"][0]["summary"] and key in data["policies"][0]["episodes"][0]
+
+
+def test_a_failure_is_never_counted_as_a_success(tmp_path):
+    """The first wave's speed_reduction never finished an episode yet sat on the Pareto
+    front: a run-up that never completes has at_speed False, its run-up time is the episode
+    limit, no residual, and it stays off the front."""
+    res = evaluate(SPEED, "yoshida_odd", "baseline:speed_reduction", episodes=3, seed=0)
+    setup_length = gym.make(SPEED).unwrapped.setup.episode_length
+    ok = evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=3, seed=0)
+    for e in res.episodes:
+        if not e["at_speed"]:
+            assert e["run_up_time"] == pytest.approx(setup_length)
+            assert math.isnan(e["residual_vibration"])
+    s = res.summary()
+    assert s["at_speed"]["mean"] < 1.0
+    paths = write_report([res, ok], tmp_path)
+    text = paths["summary"].read_text()
+    assert "at_speed" in text
+    from abb_gym.evaluation.report import plot_pareto
+    assert plot_pareto([res, ok], [{"family": "x", "run_up_time": 1.0,
+                                    "residual_vibration": 0.01, "at_speed": 0.5}],
+                       tmp_path / "p.png").exists()
+
+
+def test_replay_reproduces_the_recorded_policy_on_its_machine():
+    """replay:SPEC records SPEC on the nominal machine: on that machine it is SPEC, action for
+    action; the report's feedback value of SPEC is then exactly zero."""
+    from abb_gym.evaluation.report import feedback_values
+    for spec in ("baseline:retry", "baseline:knots"):
+        a = evaluate(SPEED, "yoshida_odd", spec, episodes=2, seed=0, preset="nominal")
+        b = evaluate(SPEED, "yoshida_odd", f"replay:{spec}", episodes=2, seed=0,
+                     preset="nominal")
+        assert [e["return"] for e in a.episodes] == [e["return"] for e in b.episodes]
+        assert [e["residual_vibration"] for e in a.episodes] == \
+            [e["residual_vibration"] for e in b.episodes]
+        fb = feedback_values([a, b])[spec]
+        assert fb["return"]["mean"] == 0.0 and fb["residual_vibration"]["mean"] == 0.0
+
+
+def test_closed_loop_baselines_react_to_the_vibration():
+    """retry dips and runs up again when the vibration at speed stays above its threshold
+    (here: any vibration), and holds otherwise; resonance_dwell dwells near the critical
+    speed it finds from the vibration peak."""
+    from abb_gym.evaluation.evaluate import Chunk, run_chunk
+    scene = gym.make(SPEED).unwrapped.scene
+    chunk = Chunk(SPEED, "yoshida_odd", "nominal", "x", 0, (0,), record=(0,))
+    always = make_baseline("retry", scene, params={"threshold": 1e-9, "max_retries": 1,
+                                                   "check_time": 0.3})
+    never = make_baseline("retry", scene, params={"threshold": 1e3, "check_time": 0.3})
+    ep_a, roll_a = run_chunk(chunk, always)
+    ep_n, roll_n = run_chunk(chunk, never)
+    assert ep_a[0]["run_up_time"] > ep_n[0]["run_up_time"] + 1.0  # it dipped once
+    assert roll_a[0].rotor_speed.max() == pytest.approx(scene.drive_operating_speed)
+    res = make_baseline("resonance_dwell", scene, params={"dwell_time": 1.0})
+    ep_r, roll_r = run_chunk(chunk, res)
+    w = roll_r[0].rotor_speed
+    dwell = np.isclose(np.diff(w), 0.0) & (w[1:] > 0.5 * scene.critical_speed) & \
+        (w[1:] < 0.99 * scene.drive_operating_speed)
+    assert dwell.sum() * 0.01 == pytest.approx(1.0, abs=0.02)
+    held = w[1:][dwell]
+    assert abs(held.mean() / scene.critical_speed - 1) < 0.25
 
 
 def test_evaluate_cli(tmp_path, capsys):

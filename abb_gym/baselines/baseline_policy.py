@@ -19,6 +19,7 @@ resolve through :func:`load_baseline` (registered as an ``abb_gym.policies`` ent
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -26,13 +27,17 @@ import numpy as np
 from .. import resources
 from ..configuration import read_yaml
 from ..envs.actions import dwell_action
+from ..physics import drive_law as dl
 from ..physics.drives import SpeedProfile
 from ..physics.rotor import spinning_inertia
 from ..physics.scene import Scene
 from . import profiles
+from .closed_loop import CLOSED_LOOP
 
-__all__ = ["BaselinePolicy", "tuned_parameters", "tuned_file", "make_baseline",
-           "load_baseline", "dwell_action"]
+__all__ = ["BaselinePolicy", "ClosedLoopPolicy", "SpeedReferencePolicy", "tuned_parameters",
+           "tuned_file", "make_baseline", "load_baseline", "dwell_action", "FAMILY_NAMES"]
+
+FAMILY_NAMES = tuple(profiles.FAMILIES) + tuple(CLOSED_LOOP)
 
 
 def tuned_file(scene_name: str):
@@ -47,11 +52,50 @@ def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
         return None
     data = read_yaml(path, "tuned baselines")
     entry = (data.get("families") or {}).get(family)
-    return dict(entry["params"]) if entry and "params" in entry else None
+    if not entry or "params" not in entry:
+        return None
+    # validated against the family's declared parameters (unit, bounds)
+    return profiles.build_family(family, **dict(entry["params"])).to_params()
 
 
-class BaselinePolicy:
-    """A speed profile per sub-environment, executed through the environment's action."""
+class SpeedReferencePolicy:
+    """Turns a speed reference into the environment's action.
+
+    * RunUpSpeed: the constant acceleration that lands the rotor exactly on the reference at
+      the end of the interval, ``a = (w_ref(t + dt) - w) / dt``, in units of
+      ``drive_max_acceleration``; on a profile whose breakpoints fall on control instants
+      this is the profile itself, so the run equals ``simulate`` with that profile.
+    * RunUpTorque: a speed-tracking controller within the scene's torque limit: the same
+      deadbeat acceleration times the spinning inertia (rotor plus balls rolling with it,
+      :func:`abb_gym.physics.rotor.spinning_inertia`), plus the bearing drag,
+      ``T = J_spin a + b_0 w``, clipped to the limit.
+    """
+
+    name = "baseline"
+    params: dict[str, Any] = {}
+
+    def _bind(self, env) -> None:
+        setup = env.unwrapped.setup
+        self.setup = setup
+        self.kind = setup.kind
+        self.dt = setup.control_interval
+        self.alpha_max = setup.max_acceleration
+        self.torque_limit = setup.torque_limit
+        self.inertia = spinning_inertia(setup.scene)
+        self.bearing_drag = setup.scene.bearing_drag
+
+    def _actions(self, reference: np.ndarray, w: np.ndarray) -> np.ndarray:
+        accel = (reference - w) / self.dt
+        if self.kind == "speed":
+            u = accel / self.alpha_max
+        else:
+            u = (self.inertia * accel + self.bearing_drag * w) / self.torque_limit
+        return np.clip(u, -1.0, 1.0).astype(np.float32)[:, None]
+
+
+class BaselinePolicy(SpeedReferencePolicy):
+    """Open loop: a speed profile per sub-environment (one for all, or a list), executed
+    through the environment's action (DwellProfile: the action that encodes it)."""
 
     def __init__(self, name: str, profiles_: Sequence[SpeedProfile] | SpeedProfile,
                  params: Mapping[str, Any] | None = None):
@@ -65,33 +109,55 @@ class BaselinePolicy:
         return self._profiles[i]
 
     def reset(self, env, mask: np.ndarray) -> None:
-        setup = env.unwrapped.setup
-        self.kind = setup.kind
-        self.dt = setup.control_interval
-        self.alpha_max = setup.max_acceleration
-        self.torque_limit = setup.torque_limit
-        self.inertia = spinning_inertia(setup.scene)
-        self.bearing_drag = setup.scene.bearing_drag
-        self.setup = setup
+        self._bind(env)
+        n = env.num_envs
+        tables = [self._profile(i).segment_table(math.inf)[1] for i in range(n)]
+        self._n_rows = np.array([len(r) for r in tables], dtype=np.int64)
+        self._tables = np.zeros((n, int(self._n_rows.max()), dl.N_DRIVE))
+        for i, rows in enumerate(tables):
+            self._tables[i, :len(rows)] = rows
 
     def act(self, obs: np.ndarray, info: dict) -> np.ndarray:
         n = obs.shape[0]
         if self.kind == "dwell":
             return np.stack([dwell_action(self.setup, self._profile(i)) for i in range(n)])
+        # an open-loop drive knows the time and its own speed exactly
         t = np.asarray(info["time"], float)
         w = np.asarray(info["rotor_speed"], float)
-        target = np.array([float(self._profile(i).speed(t[i] + self.dt)) for i in range(n)])
-        accel = (target - w) / self.dt
-        if self.kind == "speed":
-            u = accel / self.alpha_max
-        else:
-            u = (self.inertia * accel + self.bearing_drag * w) / self.torque_limit
-        return np.clip(u, -1.0, 1.0).astype(np.float32)[:, None]
+        reference = dl.prescribed_speeds(t + self.dt, self._tables, self._n_rows)
+        return self._actions(reference, w)
+
+
+class ClosedLoopPolicy(SpeedReferencePolicy):
+    """Closed loop: a controller of :mod:`abb_gym.baselines.closed_loop` per sub-environment
+    (one parameter set for all, or a list), which sees only the observation."""
+
+    def __init__(self, name: str, families: Sequence[Any] | Any,
+                 params: Mapping[str, Any] | None = None):
+        self.name = name
+        self._families = families
+        self.params = dict(params or {})
+        self._controller = None
+
+    def reset(self, env, mask: np.ndarray) -> None:
+        self._bind(env)
+        if self.kind == "dwell":
+            raise ValueError(f"{self.name} is a closed-loop baseline; DwellProfile decides "
+                             f"before the run and observes nothing to react to")
+        if self._controller is None:
+            fams = (list(self._families) if isinstance(self._families, (list, tuple))
+                    else [self._families] * env.num_envs)
+            self._controller = type(fams[0]).controller(fams, self.setup)
+        self._controller.reset(np.asarray(mask, bool))
+
+    def act(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        obs = np.asarray(obs, float)
+        w = obs[:, 0] * self.setup.operating_speed  # the measured speed
+        return self._actions(self._controller.references(obs), w)
 
 
 def make_baseline(family: str, scene: Scene, operating_speed: float | None = None,
-                  params: Mapping[str, Any] | None = None, use_tuned: bool = True
-                  ) -> BaselinePolicy:
+                  params: Mapping[str, Any] | None = None, use_tuned: bool = True):
     """Baseline policy of ``family`` for ``scene``: explicit ``params``, else the tuned ones,
     else the family defaults."""
     sc = scene if operating_speed is None else scene.replace(
@@ -100,7 +166,10 @@ def make_baseline(family: str, scene: Scene, operating_speed: float | None = Non
         params = tuned_parameters(scene.name, family)
     params = dict(params or {})
     label = f"baseline:{family}" + (" (tuned)" if params else " (default)")
-    return BaselinePolicy(label, profiles.build(family, sc, **params), params)
+    fam = profiles.build_family(family, **params)
+    if fam.closed_loop:
+        return ClosedLoopPolicy(label, fam, params)
+    return BaselinePolicy(label, fam.profile(sc), params)
 
 
 class _LazyBaseline:
@@ -109,8 +178,9 @@ class _LazyBaseline:
     def __init__(self, family: str, scene: Scene):
         self.family = family
         self.scene = scene
-        self._inner: BaselinePolicy | None = None
+        self._inner = None
         self.name = f"baseline:{family}"
+        self.params: dict[str, Any] = {}
 
     def reset(self, env, mask):
         if self._inner is None:
@@ -127,6 +197,6 @@ class _LazyBaseline:
 def load_baseline(name: str, env_id: str | None = None, scene: Any = None, **_: Any
                   ) -> _LazyBaseline:
     """The policy of ``baseline:NAME`` (the ``abb_gym.policies`` entry point)."""
-    if name not in profiles.FAMILIES:
-        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(profiles.FAMILIES)}")
+    if name not in FAMILY_NAMES:
+        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(FAMILY_NAMES)}")
     return _LazyBaseline(name, scene)

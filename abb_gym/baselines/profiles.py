@@ -1,7 +1,12 @@
-"""Hand-designed run-up profiles from the literature, as :class:`SpeedProfile` builders.
+"""Open-loop baseline families: hand-designed run-up profiles as :class:`SpeedProfile`.
 
-Families (each a function ``family(scene, **params) -> SpeedProfile``; every profile ends at
-the scene's operating speed and holds it):
+Each family is a frozen dataclass whose parameters are declared once (unit, bounds, search
+box of the tuner, meaning; :mod:`abb_gym.configuration`); ``family.profile(scene)`` builds the
+profile, which ends at the scene's operating speed and holds it.  ``None`` parameters take the
+family default (Yoshida's scaling rule, sec. 4.5: the dwell starts at the critical speed, its
+length scales with the rotor's time scale, 0.5 s at 100 rad/s, so ``dwell_time = 50 /
+omega_c``; the run-up acceleration is half the scene's ``drive_max_acceleration``, Yoshida's 40
+of 80 rad/s^2).
 
 =====================  =====================================================================
 family                 profile
@@ -10,33 +15,43 @@ family                 profile
 ``speed_dwell``        Yoshida sec. 4.2: a constant-speed dwell of ``dwell_time`` at
                        ``dwell_speed``
 ``accel_dwell``        Yoshida sec. 4.3: a dwell of ``dwell_time`` at a lower acceleration
-                       ``dwell_accel`` (> 0, default half the run-up rate) starting at
-                       ``dwell_speed``
-``decel_dwell``        Yoshida Fig. 4.18: the same with a deceleration (``dwell_accel`` < 0,
-                       default minus half the run-up rate), cut at standstill
+                       ``dwell_accel`` (> 0) starting at ``dwell_speed``
+``decel_dwell``        Yoshida Fig. 4.18: the same with a deceleration (``dwell_accel`` < 0),
+                       cut at standstill
 ``speed_reduction``    temporary speed reduction (Machines 2020, 8(4), 74): run up to the
-                       operating speed, hold ``settle_time``, decelerate at ``accel`` to a
-                       plateau ``plateau_speed`` above the critical speed, hold it
-                       ``plateau_time``, and return to the operating speed
+                       operating speed, hold ``hold_time``, decelerate to a plateau
+                       ``plateau_speed`` above the critical speed, hold it ``plateau_time``,
+                       and return to the operating speed
+``knots``              the strongest open-loop family: a speed profile through K free knots
+                       (speed ``knot_speeds[k]``, reached after ``knot_times[k]`` s more than the
+                       drive's fastest slope needs, so holds and slow creeps are possible),
+                       then the final approach into the band at ``final_accel``
 =====================  =====================================================================
 
-Speeds in rad/s, times in s, accelerations in rad/s^2.  Defaults follow Yoshida's scaling rule
-(sec. 4.5): the dwell starts at the critical speed and its length scales with the rotor's time
-scale, 0.5 s at 100 rad/s, so ``dwell_time = 50 / omega_c``; the run-up acceleration defaults
-to half the scene's ``drive_max_acceleration`` (Yoshida's 40 of 80 rad/s^2).  The plateau of the
-speed reduction defaults to 1.3 omega_c, held 50 / omega_c after a hold of the same length.
-For other parameter changes the thesis re-tunes the dwell by simulation: that is what
-:mod:`abb_gym.baselines.tuner` does.
+Search boxes are in units of the scene: ``wc`` the lower critical speed, ``td`` Yoshida's dwell
+time ``50 / omega_c``, ``amax`` the drive's largest acceleration, ``wop`` the operating speed,
+``tref`` the fastest run-up ``w_op / amax``.  Speeds in rad/s, times in s, accelerations in
+rad/s^2.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
+from ..configuration import ConfigError, declare, specs
+from ..configuration import build as build_config
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene
 
+__all__ = ["FAMILIES", "Family", "build_family", "build", "duration", "default_accel",
+           "default_dwell_time", "scales", "Ramp", "SpeedDwell", "AccelDwell", "DecelDwell",
+           "SpeedReduction", "Knots"]
+
 
 def default_accel(scene: Scene) -> float:
+    """Half the drive's largest acceleration [rad/s^2] (Yoshida's 40 of 80 rad/s^2)."""
     return 0.5 * scene.drive_max_acceleration
 
 
@@ -45,81 +60,244 @@ def default_dwell_time(scene: Scene) -> float:
     return 50.0 / scene.critical_speed
 
 
-def _check_speed(name: str, value: float, scene: Scene) -> None:
+def scales(scene: Scene) -> dict[str, float]:
+    """The units of the search boxes (module docstring)."""
+    wop = scene.drive_operating_speed
+    return {"wc": scene.critical_speed, "td": default_dwell_time(scene),
+            "amax": scene.drive_max_acceleration, "wop": wop,
+            "tref": wop / scene.drive_max_acceleration, "1": 1.0}
+
+
+def _accel(doc: str = "run-up acceleration (default half the drive's largest)"):
+    return declare(None, unit="rad/s^2", gt=0.0, le=1e6, nullable=True, doc=doc,
+                   search=(0.2, 1.0, "amax"))
+
+
+class Family:
+    """Base of the baseline families (see the module docstring)."""
+
+    name: ClassVar[str] = ""
+    closed_loop: ClassVar[bool] = False
+
+    def to_params(self) -> dict[str, Any]:
+        """The parameters that are set (YAML-safe)."""
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if v is not None:
+                out[f.name] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    def _accel(self, scene: Scene) -> float:
+        a = getattr(self, "accel", None)
+        a = default_accel(scene) if a is None else a
+        if a > scene.drive_max_acceleration * (1 + 1e-9):
+            raise ConfigError(f"baseline {self.name}: 'accel' must be <= drive_max_acceleration "
+                              f"= {scene.drive_max_acceleration:g} rad/s^2 (got {a:g})")
+        return a
+
+    def profile(self, scene: Scene) -> SpeedProfile:
+        raise NotImplementedError
+
+
+def _speed_at_most_operating(name: str, value: float, scene: Scene) -> None:
     if not 0 <= value <= scene.drive_operating_speed:
-        raise ValueError(f"{name} must be in [0, drive_operating_speed = "
-                         f"{scene.drive_operating_speed:g}] rad/s (got {value:g})")
+        raise ConfigError(f"field {name!r} must be in [0, drive_operating_speed = "
+                          f"{scene.drive_operating_speed:g}] rad/s (got {value:g})")
 
 
-def ramp(scene: Scene, accel: float | None = None) -> SpeedProfile:
-    return SpeedProfile.ramp(accel or default_accel(scene), scene.drive_operating_speed)
+@dataclass(frozen=True)
+class Ramp(Family):
+    name: ClassVar[str] = "ramp"
+    accel: float | None = _accel()
+
+    def profile(self, scene):
+        return SpeedProfile.ramp(self._accel(scene), scene.drive_operating_speed)
 
 
-def speed_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: float | None = None,
-                accel: float | None = None) -> SpeedProfile:
-    return accel_dwell(scene, dwell_speed, dwell_time, 0.0, accel)
+@dataclass(frozen=True)
+class AccelDwell(Family):
+    name: ClassVar[str] = "accel_dwell"
+    dwell_speed: float | None = declare(None, unit="rad/s", ge=0.0, le=1e5, nullable=True,
+                                        doc="speed at the dwell start (default the critical "
+                                            "speed)", search=(0.8, 1.4, "wc"))
+    dwell_time: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                       doc="dwell length (default 50 / omega_c)",
+                                       search=(0.2, 2.5, "td"))
+    dwell_accel: float | None = declare(None, unit="rad/s^2", ge=-1e6, le=1e6, nullable=True,
+                                        doc="acceleration during the dwell (default half the "
+                                            "run-up rate)", search=(0.02, 0.5, "amax"))
+    accel: float | None = _accel()
+
+    def _default_dwell_accel(self, accel: float) -> float:
+        return 0.5 * accel  # Yoshida: 20 of 40
+
+    def profile(self, scene):
+        dwell_speed = scene.critical_speed if self.dwell_speed is None else self.dwell_speed
+        _speed_at_most_operating("dwell_speed", dwell_speed, scene)
+        dwell_time = default_dwell_time(scene) if self.dwell_time is None else self.dwell_time
+        accel = self._accel(scene)
+        dwell_accel = (self._default_dwell_accel(accel) if self.dwell_accel is None
+                       else self.dwell_accel)
+        end = dwell_speed + dwell_accel * dwell_time
+        if end > scene.drive_operating_speed:  # the dwell would overshoot: cut it at the top
+            dwell_time = (scene.drive_operating_speed - dwell_speed) / dwell_accel
+        elif end < 0:  # a deceleration would reverse the rotor: cut it at standstill
+            dwell_time = dwell_speed / -dwell_accel
+        return SpeedProfile.dwell(accel, dwell_speed, dwell_time, dwell_accel,
+                                  scene.drive_operating_speed)
 
 
-def accel_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: float | None = None,
-                dwell_accel: float | None = None, accel: float | None = None) -> SpeedProfile:
-    dwell_speed = scene.critical_speed if dwell_speed is None else dwell_speed
-    _check_speed("dwell_speed", dwell_speed, scene)
-    dwell_time = default_dwell_time(scene) if dwell_time is None else dwell_time
-    accel = accel or default_accel(scene)
-    dwell_accel = 0.5 * accel if dwell_accel is None else dwell_accel  # Yoshida: 20 of 40
-    end = dwell_speed + dwell_accel * dwell_time
-    if end > scene.drive_operating_speed:  # the dwell would overshoot: cut it at the top speed
-        dwell_time = (scene.drive_operating_speed - dwell_speed) / dwell_accel
-    elif end < 0:  # a deceleration would reverse the rotor: cut it at standstill
-        dwell_time = dwell_speed / -dwell_accel
-    return SpeedProfile.dwell(accel, dwell_speed, dwell_time, dwell_accel,
-                              scene.drive_operating_speed)
+@dataclass(frozen=True)
+class SpeedDwell(AccelDwell):
+    name: ClassVar[str] = "speed_dwell"
+    dwell_accel: float | None = declare(None, unit="rad/s^2", ge=0.0, le=0.0, nullable=True,
+                                        doc="0: the dwell holds its speed")
+
+    def _default_dwell_accel(self, accel):
+        return 0.0
 
 
-def decel_dwell(scene: Scene, dwell_speed: float | None = None, dwell_time: float | None = None,
-                dwell_accel: float | None = None, accel: float | None = None) -> SpeedProfile:
-    if dwell_accel is None:
-        dwell_accel = -0.5 * (accel or default_accel(scene))  # Yoshida Fig. 4.18: -20 of 40
-    if dwell_accel >= 0:
-        raise ValueError(f"dwell_accel of a deceleration dwell must be < 0 [rad/s^2] "
-                         f"(got {dwell_accel:g})")
-    return accel_dwell(scene, dwell_speed, dwell_time, dwell_accel, accel)
+@dataclass(frozen=True)
+class DecelDwell(AccelDwell):
+    name: ClassVar[str] = "decel_dwell"
+    dwell_speed: float | None = declare(None, unit="rad/s", ge=0.0, le=1e5, nullable=True,
+                                        doc="speed at the dwell start (default the critical "
+                                            "speed)", search=(0.9, 1.6, "wc"))
+    dwell_accel: float | None = declare(None, unit="rad/s^2", ge=-1e6, lt=0.0, nullable=True,
+                                        doc="deceleration during the dwell (default minus half "
+                                            "the run-up rate)", search=(-0.5, -0.02, "amax"))
+    dwell_time: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                       doc="dwell length (default 50 / omega_c)",
+                                       search=(0.1, 1.5, "td"))
+
+    def _default_dwell_accel(self, accel):
+        return -0.5 * accel  # Yoshida Fig. 4.18: -20 of 40
 
 
-def speed_reduction(scene: Scene, plateau_speed: float | None = None,
-                    plateau_time: float | None = None, settle_time: float | None = None,
-                    accel: float | None = None) -> SpeedProfile:
-    op = scene.drive_operating_speed
-    plateau_speed = 1.3 * scene.critical_speed if plateau_speed is None else plateau_speed
-    _check_speed("plateau_speed", plateau_speed, scene)
-    plateau_time = default_dwell_time(scene) if plateau_time is None else plateau_time
-    settle_time = default_dwell_time(scene) if settle_time is None else settle_time
-    accel = accel or default_accel(scene)
-    for name, v in (("plateau_time", plateau_time), ("settle_time", settle_time),
-                    ("accel", accel)):
-        if not v >= 0:
-            raise ValueError(f"{name} must be >= 0 (got {v})")
-    drop = (op - plateau_speed) / accel
-    return SpeedProfile(segments=((op / accel, accel), (settle_time, 0.0), (drop, -accel),
-                                  (plateau_time, 0.0), (drop, accel)))
+@dataclass(frozen=True)
+class SpeedReduction(Family):
+    name: ClassVar[str] = "speed_reduction"
+    plateau_speed: float | None = declare(None, unit="rad/s", ge=0.0, le=1e5, nullable=True,
+                                          doc="speed of the plateau (default 1.3 omega_c)",
+                                          search=(1.05, 2.0, "wc"))
+    plateau_time: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                         doc="time on the plateau (default 50 / omega_c)",
+                                         search=(0.2, 4.0, "td"))
+    hold_time: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                      doc="hold at the operating speed before the reduction "
+                                          "(default 50 / omega_c)", search=(0.05, 2.0, "td"))
+    accel: float | None = _accel()
+
+    def profile(self, scene):
+        op = scene.drive_operating_speed
+        plateau = 1.3 * scene.critical_speed if self.plateau_speed is None else self.plateau_speed
+        plateau = min(plateau, op)
+        plateau_time = default_dwell_time(scene) if self.plateau_time is None else self.plateau_time
+        hold = default_dwell_time(scene) if self.hold_time is None else self.hold_time
+        accel = self._accel(scene)
+        drop = (op - plateau) / accel
+        return SpeedProfile(segments=((op / accel, accel), (hold, 0.0), (drop, -accel),
+                                      (plateau_time, 0.0), (drop, accel)))
 
 
-FAMILIES: dict[str, Callable[..., SpeedProfile]] = {
-    "ramp": ramp,
-    "speed_dwell": speed_dwell,
-    "accel_dwell": accel_dwell,
-    "decel_dwell": decel_dwell,
-    "speed_reduction": speed_reduction,
-}
+KNOTS = 3
+
+
+def _tuple(n: int, lo: float, hi: float, scale: str, unit: str, doc: str):
+    return declare(None, kind="any", unit=unit, nullable=True, doc=doc,
+                   search=tuple((lo, hi, scale) for _ in range(n)))
+
+
+@dataclass(frozen=True)
+class Knots(Family):
+    name: ClassVar[str] = "knots"
+    knot_speeds: tuple[float, ...] | None = _tuple(
+        KNOTS, 0.0, 1.0, "wop", "rad/s", "speed of each knot, in [0, w_op] (default: evenly "
+                                         "spaced below w_op)")
+    knot_times: tuple[float, ...] | None = _tuple(
+        KNOTS, 0.0, 1.0, "tref", "s", "time of each segment beyond the drive's fastest slope "
+                                      "(default 0: a full-acceleration ramp)")
+    final_accel: float | None = _accel("acceleration of the final approach into the band")
+
+    def __post_init__(self):
+        for name in ("knot_speeds", "knot_times"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, (int, float)) or not all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                    and x >= 0 for x in v):
+                raise ConfigError(f"baseline knots: field {name!r} must be a list of finite "
+                                  f"numbers >= 0 (got {v!r})")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if (self.knot_speeds is not None and self.knot_times is not None
+                and len(self.knot_speeds) != len(self.knot_times)):
+            raise ConfigError(f"baseline knots: 'knot_speeds' and 'knot_times' must have the "
+                              f"same length (got {len(self.knot_speeds)} and "
+                              f"{len(self.knot_times)})")
+
+    def profile(self, scene):
+        op = scene.drive_operating_speed
+        amax = scene.drive_max_acceleration
+        k = len(self.knot_speeds or self.knot_times or ()) or KNOTS
+        speeds = self.knot_speeds or tuple(op * (i + 1) / (k + 1) for i in range(k))
+        extra = self.knot_times or (0.0,) * k
+        for v in speeds:
+            _speed_at_most_operating("knot_speeds", v, scene)
+        segs = []
+        w = 0.0
+        for target, more in zip(speeds, extra):
+            dw = target - w
+            dur = abs(dw) / amax + more
+            if dur > 0:
+                segs.append((dur, dw / dur))
+            w = target
+        final = self.final_accel if self.final_accel is not None else default_accel(scene)
+        if final > amax * (1 + 1e-9):
+            raise ConfigError(f"baseline knots: 'final_accel' must be <= drive_max_acceleration "
+                              f"= {amax:g} rad/s^2 (got {final:g})")
+        if op > w:
+            segs.append(((op - w) / final, final))
+        return SpeedProfile(segments=tuple(segs))
+
+
+FAMILIES: dict[str, type[Family]] = {
+    f.name: f for f in (Ramp, SpeedDwell, AccelDwell, DecelDwell, SpeedReduction, Knots)}
+
+
+def build_family(name: str, **params: Any) -> Family:
+    """The family ``name`` with ``params`` (validated against its declarations)."""
+    from .closed_loop import CLOSED_LOOP
+    table = {**FAMILIES, **CLOSED_LOOP}
+    if name not in table:
+        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(table)}")
+    return build_config(table[name], params, f"baseline {name}")
 
 
 def build(name: str, scene: Scene, **params: Any) -> SpeedProfile:
-    """The profile of baseline family ``name`` for ``scene`` (unknown names raise)."""
+    """The profile of open-loop family ``name`` for ``scene`` (unknown names raise)."""
     if name not in FAMILIES:
-        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(FAMILIES)}")
-    return FAMILIES[name](scene, **params)
+        raise ValueError(f"unknown baseline {name!r} (open-loop families: "
+                         f"{', '.join(FAMILIES)})")
+    return build_family(name, **params).profile(scene)
 
 
 def duration(profile: SpeedProfile) -> float:
     """Time [s] until the last acceleration segment ends (the hold starts)."""
     return float(profile.breakpoints[-1])
+
+
+def search_space(cls: type[Family]) -> list[tuple[str, int | None, float, float, str]]:
+    """(parameter, index in a tuple parameter or None, low, high, scale) of every searched
+    coordinate of a family."""
+    out = []
+    for name, spec in specs(cls).items():
+        if spec.search is None:
+            continue
+        if isinstance(spec.search[0], tuple):
+            out += [(name, i, lo, hi, sc) for i, (lo, hi, sc) in enumerate(spec.search)]
+        else:
+            lo, hi, sc = spec.search
+            out.append((name, None, lo, hi, sc))
+    return out

@@ -1,17 +1,20 @@
 """Tune and sweep the baseline families on an environment's scenario distribution.
 
-Every candidate parameter set of a family becomes a :class:`SpeedProfile`; candidates x
-episodes run as the sub-environments of native vector environments (RunUpSpeed, each
-sub-environment with its own profile and seeded episode), chunked into executor tasks.
+Every candidate parameter set of a family becomes a policy (a speed profile, or a closed-loop
+controller) of one sub-environment; candidates x episodes run as the sub-environments of
+native vector environments, chunked into executor tasks.
 
-* :func:`tune` - the tuner: per family, a seeded space-filling sample of the parameter box
-  (:data:`SPACES`, in units of the scene's critical speed, Yoshida's dwell time and the default
-  run-up acceleration), then a second sample in a box a quarter the size around the best;
-  the objective is the mean return on the **training** preset (what the agents optimise).
-  The result goes where ``out`` says (:func:`write_tuned`); a ``baselines/<scene>.yaml`` on
-  the search path of :mod:`abb_gym.resources` is what ``baseline:NAME`` policies then use.
-* :func:`sweep` - the same families over the same boxes on the **test** preset, as points
-  (mean run-up time, mean residual vibration) for the speed-versus-accuracy chart.
+* :func:`tune` - CMA-ES (the ``cma`` package: Hansen's reference implementation) over each
+  family's search box (declared with its parameters, :mod:`abb_gym.baselines.profiles` and
+  :mod:`~abb_gym.baselines.closed_loop`), in coordinates scaled to [0, 1]; the objective is
+  the mean return on the **training** preset (what the agents optimise) over a fixed set of
+  seeded episodes (common random numbers: every candidate meets the same machines).  The
+  family's default is always a candidate, so the result is never worse than the default on
+  that set.  The result goes where ``out`` says (:func:`write_tuned`); a
+  ``baselines/<scene>.yaml`` on the search path of :mod:`abb_gym.resources` is what
+  ``baseline:NAME`` policies then use.
+* :func:`sweep` - the same families over their boxes on the **test** preset, as points (mean
+  settled run-up time, mean residual vibration) for the speed-versus-accuracy chart.
 """
 from __future__ import annotations
 
@@ -24,147 +27,206 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from .baseline_policy import BaselinePolicy
 from ..evaluation.evaluate import Chunk, run_chunk
+from ..physics import rotor
 from . import profiles
+from .baseline_policy import BaselinePolicy, ClosedLoopPolicy, FAMILY_NAMES
+from .closed_loop import CLOSED_LOOP
 
 ENV_ID = "abb_gym/RunUpSpeed-v0"
-
-# parameter -> (low, high, unit): "wc" x critical speed, "td" x default dwell time,
-# "acc" x default run-up acceleration
-SPACES: dict[str, dict[str, tuple[float, float, str]]] = {
-    "ramp": {"accel": (0.5, 2.0, "acc")},
-    "speed_dwell": {"dwell_speed": (0.8, 1.4, "wc"), "dwell_time": (0.2, 2.5, "td")},
-    "accel_dwell": {"dwell_speed": (0.8, 1.4, "wc"), "dwell_time": (0.2, 2.5, "td"),
-                    "dwell_accel": (0.1, 0.9, "acc")},
-    "decel_dwell": {"dwell_speed": (0.9, 1.6, "wc"), "dwell_time": (0.1, 1.5, "td"),
-                    "dwell_accel": (-0.9, -0.1, "acc")},
-    "speed_reduction": {"plateau_speed": (1.05, 2.0, "wc"), "plateau_time": (0.2, 4.0, "td")},
-}
+OBJECTIVE = "mean return on the preset (the environment's reward)"
 
 
-def _scales(scene) -> dict[str, float]:
-    return {"wc": scene.critical_speed, "td": profiles.default_dwell_time(scene),
-            "acc": profiles.default_accel(scene)}
+def _family_class(name: str):
+    table = {**profiles.FAMILIES, **CLOSED_LOOP}
+    if name not in table:
+        raise ValueError(f"unknown baseline family {name!r}; available: {', '.join(table)}")
+    return table[name]
 
 
-def sample(family: str, scene, n: int, rng: np.random.Generator,
-           box: dict[str, tuple[float, float]] | None = None) -> list[dict[str, float]]:
-    """``n`` parameter sets of ``family`` (Latin hypercube in the box, physical units)."""
-    space = SPACES[family]
-    sc = _scales(scene)
-    box = box or {k: (lo * sc[u], hi * sc[u]) for k, (lo, hi, u) in space.items()}
-    out = []
-    cols = {k: (rng.permutation(n) + rng.random(n)) / n for k in box}
-    for i in range(n):
-        params = {k: float(lo + cols[k][i] * (hi - lo)) for k, (lo, hi) in box.items()}
-        if "plateau_speed" in params:
-            params["plateau_speed"] = min(params["plateau_speed"], scene.drive_operating_speed)
-        if "dwell_speed" in params:
-            params["dwell_speed"] = min(params["dwell_speed"], scene.drive_operating_speed)
-        out.append(params)
+def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
+                  ) -> dict[str, float]:
+    """The units of the search boxes for a scene and environment preset."""
+    from ..envs.setup import EnvSetup
+    kind = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
+            "abb_gym/DwellProfile-v0": "dwell"}[env_id]
+    setup = EnvSetup(kind, scene_name, preset)
+    sc = setup.scene.replace(drive_operating_speed=setup.operating_speed)
+    out = profiles.scales(sc)
+    a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed)
+    out["settle"] = setup.config.settle_time
+    out["aop"] = a_op / setup.vibration_scale
+    return out
+
+
+def params_from_unit(family: str, x: np.ndarray, scales: dict[str, float]) -> dict[str, Any]:
+    """Family parameters from a point ``x`` of the unit cube of its search space."""
+    space = profiles.search_space(_family_class(family))
+    out: dict[str, Any] = {}
+    for (name, index, lo, hi, unit), u in zip(space, np.clip(x, 0.0, 1.0)):
+        v = (lo + float(u) * (hi - lo)) * scales[unit]
+        if index is None:
+            out[name] = v
+        else:
+            out.setdefault(name, []).append(v)
+    if "max_retries" in out:
+        out["max_retries"] = int(round(out["max_retries"]))
+    for key in ("dwell_speed", "plateau_speed", "dip_speed"):
+        if key in out:
+            out[key] = min(out[key], scales["wop"])
     return out
 
 
 @dataclass(frozen=True)
 class CandidateTask:
     """Candidates x episodes of one family as one vector environment."""
+    env_id: str
     scene: str
     preset: str
     family: str
-    candidates: tuple[tuple[tuple[str, float], ...], ...]
+    candidates: tuple[tuple[tuple[str, Any], ...], ...]
     episodes: tuple[int, ...]
     seed: int
 
 
-def _run_candidates(task: CandidateTask) -> list[dict]:
-    pairs = [(c, k) for c in range(len(task.candidates)) for k in task.episodes]
-    chunk = Chunk(ENV_ID, task.scene, task.preset, f"sweep:{task.family}", task.seed,
-                  tuple(k for _, k in pairs))
-
+def _policy_for(task: CandidateTask, pairs):
     def factory(env):
         setup = env.unwrapped.setup
         sc = setup.scene.replace(drive_operating_speed=setup.operating_speed)
-        profs = [profiles.build(task.family, sc, **dict(task.candidates[c])) for c, _ in pairs]
-        return BaselinePolicy(f"baseline:{task.family}", profs)
+        fams = [profiles.build_family(task.family, **dict(task.candidates[c])) for c, _ in pairs]
+        name = f"baseline:{task.family}"
+        if fams[0].closed_loop:
+            return ClosedLoopPolicy(name, fams)
+        return BaselinePolicy(name, [f.profile(sc) for f in fams])
+    return factory
 
-    episodes, _ = run_chunk(chunk, factory)
+
+def _run_candidates(task: CandidateTask) -> list[dict]:
+    pairs = [(c, k) for c in range(len(task.candidates)) for k in task.episodes]
+    chunk = Chunk(task.env_id, task.scene, task.preset, f"sweep:{task.family}", task.seed,
+                  tuple(k for _, k in pairs))
+    episodes, _ = run_chunk(chunk, _policy_for(task, pairs))
     for (c, _), row in zip(pairs, episodes):
         row["candidate"] = c
     return episodes
 
 
+SUMMARY_KEYS = ("return", "run_up_time", "residual_vibration", "peak_whirl", "at_speed",
+                "balanced")
+
+
 def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], episodes: int,
-                        seed: int, preset: str, executor=None, per_task: int = 256) -> list[dict]:
-    """Mean metrics of each candidate over ``episodes`` seeded episodes."""
+                        seed: int, preset: str, executor=None, per_task: int = 256,
+                        env_id: str = ENV_ID, progress: bool = False) -> list[dict]:
+    """Mean metrics of each candidate over ``episodes`` seeded episodes (the residual over the
+    episodes that settled; ``at_speed`` is the share that did)."""
     from ..physics.scene import load_scene
     load_scene(scene_name)  # validate early, with the scene's own error message
+    for c in candidates:
+        profiles.build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // episodes)
-    cand = [tuple(sorted(c.items())) for c in candidates]
-    tasks = [CandidateTask(scene_name, preset, family, tuple(cand[a:a + per]),
+    cand = [tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in c.items()))
+            for c in candidates]
+    tasks = [CandidateTask(env_id, scene_name, preset, family, tuple(cand[a:a + per]),
                            tuple(range(episodes)), seed)
              for a in range(0, len(cand), per)]
     if executor is None:  # this process; the vector environment already uses every core
-        parts = [_run_candidates(t) for t in tqdm(tasks, desc=f"{family} candidates",
-                                                  disable=len(tasks) < 2)]
+        parts = [_run_candidates(t) for t in tqdm(tasks, desc=f"{family}: candidate batches",
+                                                  disable=not progress or len(tasks) < 2)]
     else:
-        parts = executor.map(_run_candidates, tasks, desc=f"{family} candidates")
+        parts = executor.map(_run_candidates, tasks, desc=f"{family}: candidate batches")
     rows = []
     for a, part in zip(range(0, len(cand), per), parts):
         for c in range(len(tasks[a // per].candidates)):
             eps = [e for e in part if e["candidate"] == c]
-            mean = {k: float(np.nanmean([float(e[k]) for e in eps])) if any(
-                np.isfinite(float(e[k])) for e in eps) else math.nan
-                for k in ("return", "time_to_speed", "residual_vibration", "peak_whirl",
-                          "balanced")}
-            rows.append({"family": family, "params": dict(cand[a + c]), **mean})
+            mean = {}
+            for k in SUMMARY_KEYS:
+                vals = np.array([float(e[k]) for e in eps])
+                mean[k] = float(np.nanmean(vals)) if np.isfinite(vals).any() else math.nan
+            params = {k: (list(v) if isinstance(v, tuple) else v) for k, v in cand[a + c]}
+            rows.append({"family": family, "params": params, **mean})
     return rows
 
 
-def tune(scene_name: str, families=tuple(SPACES), n_first: int = 24, n_second: int = 16,
-         episodes: int = 24, seed: int = 20_000, preset: str = "train", executor=None,
-         out: str | Path | None = None, force: bool = False) -> dict[str, Any]:
-    """Tune each family (see the module docstring); returns the result and, with ``out``,
-    writes it there (:func:`write_tuned`)."""
-    from ..physics.scene import load_scene
-    scene = load_scene(scene_name)
-    rng = np.random.default_rng(seed)
-    result: dict[str, Any] = {
-        "scene": scene_name, "env": ENV_ID, "preset": preset, "episodes": episodes,
-        "seed": seed, "objective": "mean return on the preset (the environment's reward)",
-        "families": {}}
+def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
+                popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
+                executor, bar) -> tuple[dict, dict, int]:
+    import cma
+
+    space = profiles.search_space(_family_class(family))
+    default = evaluate_candidates(scene_name, family, [{}], episodes, seed, preset, executor,
+                                  env_id=env_id)[0]
+    bar.update(1)
+    best = default
+    evaluations = 1
+    if space:
+        opts = {"bounds": [0.0, 1.0], "seed": seed % (2 ** 31 - 1) + 1, "verbose": -9,
+                "maxfevals": max(budget - 1, 1)}
+        if popsize:
+            opts["popsize"] = popsize
+        es = cma.CMAEvolutionStrategy(np.full(len(space), 0.5), 0.3, opts)
+        while not es.stop():
+            xs = es.ask()
+            cands = [params_from_unit(family, x, scales) for x in xs]
+            rows = evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
+                                       executor, env_id=env_id)
+            es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9 for r in rows])
+            evaluations += len(rows)
+            bar.update(len(rows))
+            for r in rows:
+                if r["return"] > best["return"]:
+                    best = r
+    return best, default, evaluations
+
+
+def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: int = 24,
+         seed: int = 20_000, preset: str = "train", executor=None,
+         out: str | Path | None = None, force: bool = False, popsize: int | None = None,
+         env_id: str = ENV_ID, progress: bool = True) -> dict[str, Any]:
+    """Tune each family with CMA-ES (module docstring): ``budget`` candidates per family, each
+    scored on ``episodes`` seeded episodes of ``preset``.  Returns the result and, with
+    ``out``, writes it there (:func:`write_tuned`)."""
+    import cma
+
+    families = tuple(families)
     for fam in families:
-        first = sample(fam, scene, n_first, rng)
-        default = {}
-        rows = evaluate_candidates(scene_name, fam, [default] + first, episodes, seed, preset,
-                                   executor)
-        best = max(rows[1:], key=lambda r: r["return"])
-        sc = _scales(scene)
-        box = {}
-        for k, (lo, hi, u) in SPACES[fam].items():
-            width = 0.25 * (hi - lo) * sc[u]
-            centre = best["params"][k]
-            box[k] = (max(lo * sc[u], centre - width / 2), min(hi * sc[u], centre + width / 2))
-        second = evaluate_candidates(scene_name, fam, sample(fam, scene, n_second, rng, box),
-                                     episodes, seed, preset, executor)
-        best = max([best] + second, key=lambda r: r["return"])
-        result["families"][fam] = {
-            "params": {k: round(v, 6) for k, v in best["params"].items()},
-            "mean_return": round(best["return"], 5),
-            "default_mean_return": round(rows[0]["return"], 5),
-            "mean_time_to_speed": round(best["time_to_speed"], 4),
-            "mean_residual_vibration": round(best["residual_vibration"], 5),
-            "candidates": 1 + n_first + n_second,
-        }
+        _family_class(fam)
+    if budget < 1 or episodes < 1:
+        raise ValueError(f"budget and episodes must be >= 1 (got {budget}, {episodes})")
+    scales = search_scales(scene_name, env_id, preset)
+    result: dict[str, Any] = {
+        "scene": scene_name, "env": env_id, "preset": preset, "episodes": episodes,
+        "seed": seed, "optimiser": f"CMA-ES (cma {cma.__version__}), {budget} candidates per "
+                                   f"family", "objective": OBJECTIVE, "families": {}}
+    with tqdm(total=budget * len(families), desc=f"tune {scene_name}", unit="candidate",
+              disable=not progress) as bar:
+        for fam in families:
+            bar.set_postfix_str(fam)
+            best, default, n = _cma_search(fam, scene_name, scales, budget, popsize, episodes,
+                                           seed, preset, env_id, executor, bar)
+            result["families"][fam] = {
+                "params": _rounded(best["params"]),
+                "mean_return": round(best["return"], 5),
+                "default_mean_return": round(default["return"], 5),
+                "mean_run_up_time": round(best["run_up_time"], 4),
+                "mean_residual_vibration": round(best["residual_vibration"], 5),
+                "at_speed": round(best["at_speed"], 4),
+                "candidates": n,
+            }
     if out is not None:
         result["path"] = str(write_tuned(result, out, force=force))
     return result
 
 
+def _rounded(params: dict[str, Any]) -> dict[str, Any]:
+    return {k: ([round(x, 6) for x in v] if isinstance(v, list) else
+                (round(v, 6) if isinstance(v, float) else v)) for k, v in params.items()}
+
+
 def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -> Path:
     """Write a tuning result to ``path`` (a ``.yaml`` file, or a folder that gets
-    ``<scene>.yaml``).  An existing file
-    is replaced only with ``force``; the installed package's shipped files never are."""
+    ``<scene>.yaml``).  An existing file is replaced only with ``force``; the installed
+    package's shipped files never are."""
     from .. import resources
     path = Path(path)
     if path.suffix not in (".yaml", ".yml"):  # a folder
@@ -184,14 +246,20 @@ def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -
     return path
 
 
-def sweep(scene_name: str, families=tuple(SPACES), n: int = 12, episodes: int = 12,
-          seed: int = 0, preset: str = "test", executor=None) -> list[dict]:
-    """Each family over its box on the test preset: rows with mean time and residual."""
-    from ..physics.scene import load_scene
-    scene = load_scene(scene_name)
+def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 12,
+          seed: int = 0, preset: str = "test", executor=None, env_id: str = ENV_ID
+          ) -> list[dict]:
+    """Each family over its box (a Latin hypercube of ``n`` points) on the test preset: rows
+    with the mean settled run-up time and residual."""
+    scales = search_scales(scene_name, env_id, preset)
     rng = np.random.default_rng(seed + 7)
     rows = []
     for fam in families:
-        rows += evaluate_candidates(scene_name, fam, sample(fam, scene, n, rng), episodes, seed,
-                                    preset, executor)
+        d = len(profiles.search_space(_family_class(fam)))
+        if d == 0:
+            continue
+        cube = (np.stack([rng.permutation(n) for _ in range(d)], axis=1) + rng.random((n, d))) / n
+        cands = [params_from_unit(fam, x, scales) for x in cube]
+        rows += evaluate_candidates(scene_name, fam, cands, episodes, seed, preset, executor,
+                                    env_id=env_id)
     return rows

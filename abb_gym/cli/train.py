@@ -94,8 +94,9 @@ def _report(res) -> None:
             return (f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, "
                     f"{m['ci_high']:.{digits}f}]")
         print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
-              f"residual vibration {fmt('residual_vibration')} W_r/e, time to speed "
-              f"{fmt('time_to_speed', 2)} s, balanced {fmt('balanced', 2)}")
+              f"at speed {fmt('at_speed', 2)}, residual vibration "
+              f"{fmt('residual_vibration')} W_r/e, run-up time {fmt('run_up_time', 2)} s, "
+              f"balanced {fmt('balanced', 2)}")
 
 
 def run_from_args(args: argparse.Namespace) -> int:

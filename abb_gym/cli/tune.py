@@ -10,24 +10,33 @@ An existing file is replaced only with ``--force``.
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from ..execution.cli import add_executor_arguments
 from .evaluate import _executor
 
 
+FAMILIES = ("ramp", "speed_dwell", "accel_dwell", "decel_dwell", "speed_reduction", "knots",
+            "retry", "resonance_dwell")
+
+
 def register(sub) -> None:
-    from ..baselines.tuner import SPACES
-    p = sub.add_parser("tune-baselines", help="tune the baseline families of a scene",
-                       description=__doc__)
-    p.add_argument("--scene", default="yoshida_odd")
-    p.add_argument("--family", action="append", choices=sorted(SPACES),
+    p = sub.add_parser("tune-baselines", help="tune the baseline families of a scene (CMA-ES)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scene", default="yoshida_odd", help="scene name or YAML path")
+    p.add_argument("--family", action="append", choices=FAMILIES,
                    help="families to tune (repeatable; default all)")
-    p.add_argument("--candidates", type=int, default=24, help="first-stage samples per family")
-    p.add_argument("--refine", type=int, default=16, help="second-stage samples per family")
+    p.add_argument("--env", default="abb_gym/RunUpSpeed-v0",
+                   choices=["abb_gym/RunUpSpeed-v0", "abb_gym/RunUpTorque-v0"],
+                   help="environment whose return is the objective")
+    p.add_argument("--budget", type=int, default=240,
+                   help="candidates per family (CMA-ES evaluations)")
+    p.add_argument("--popsize", type=int, default=None,
+                   help="CMA-ES population (default: cma's 4 + 3 ln d)")
     p.add_argument("--episodes", type=int, default=24, help="training episodes per candidate")
-    p.add_argument("--seed", type=int, default=20_000)
-    p.add_argument("--preset", default="train")
+    p.add_argument("--seed", type=int, default=20_000, help="seed of the episodes and of CMA-ES")
+    p.add_argument("--preset", default="train", help="environment preset of the objective")
     p.add_argument("--out", default=None,
                    help="file or folder to write (default: baselines/<scene>.yaml here)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
@@ -38,15 +47,21 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import yaml
-    from ..baselines.tuner import SPACES, tune
-    for name in ("candidates", "refine", "episodes"):
+    from ..baselines.tuner import tune
+    from ..envs.config import load_preset
+    from ..physics.scene import load_scene
+    for name in ("budget", "episodes"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1 (got {getattr(args, name)})")
+    if args.popsize is not None and args.popsize < 2:
+        raise ValueError(f"--popsize must be >= 2 (got {args.popsize})")
+    load_scene(args.scene)
+    load_preset(args.preset)
     out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
     if out is not None and Path(out).exists() and not Path(out).is_dir() and not args.force:
         raise ValueError(f"{out!r} exists; pass --force to replace it")
-    result = tune(args.scene, tuple(args.family or SPACES), args.candidates, args.refine,
-                  args.episodes, args.seed, args.preset, _executor(args), out=out,
-                  force=args.force)
+    result = tune(args.scene, tuple(args.family or FAMILIES), args.budget, args.episodes,
+                  args.seed, args.preset, _executor(args), out=out, force=args.force,
+                  popsize=args.popsize, env_id=args.env)
     print(yaml.safe_dump(result, sort_keys=False))
     return 0

@@ -18,7 +18,8 @@ from gymnasium import logger
 from . import kernel
 from .actions import ActionModel, as_action_array
 from .info import step_info
-from .layout import ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K
+from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
+                     T_BALLS)
 from .rendering import Renderer
 from .setup import Buffers, EnvSetup, Episode, SetupAccess
 
@@ -56,22 +57,27 @@ COMMON_DOC = textwrap.dedent(r"""
     | Term | Value per interval |
     |------|--------------------|
     | vibration | -w_vibration * (r_mean / A_peak) * dt / T_ref |
-    | time | -w_time * dt / T_ref, if the interval ends not at operating speed |
+    | time | -w_time * dt / T_ref, if the interval ends outside the operating band |
     | effort | -w_effort * integral(u^2 dt) / T_ref |
-    | residual | terminal: -w_residual * mean(r_mean / A_op) over the intervals at speed |
+    | residual | terminal: -w_residual * (vibration over the settling window) / A_op |
     | failure | terminal: -(w_failure + R_max * (T_episode - t) / T_ref + w_residual * c / A_op) |
 
     * ``r_mean``: the vibration radius averaged over the interval's RK4 steps.
-    * ``A_peak``, ``A_op``: the reference "same rotor without balls" (mass ``rotor_mass``, the
-      scene's support, this episode's imbalance U): the steady Jeffcott amplitude
-      ``U w^2 / sqrt((k - m w^2)^2 + (c w)^2)`` (larger of the two axes), at its peak over
-      [0, w_op] and at w_op.  A residual ratio of 1 is no better than without balls.
-    * "At operating speed": ``|w - w_op| <= at_speed_tolerance * w_op``.
+    * ``A_peak``, ``A_op``: the same machine with its balancer off (the total mass ``M``, the
+      scene's support, this episode's imbalance U; :func:`abb_gym.physics.rotor.
+      reference_amplitudes`): the steady Jeffcott amplitude ``U w^2 / sqrt((k - M w^2)^2 +
+      (c w)^2)`` (larger of the two axes), at its peak over [0, w_op] and at w_op.  A residual
+      ratio of 1 is no better than without a balancer.
+    * The operating band, the settling window and the residual are those of
+      :mod:`abb_gym.physics.runup`: "in the band" means ``|w - w_op| <= at_speed_tolerance *
+      w_op`` (0.2 %, a drive's speed loop); the run-up completes after an unbroken stay of
+      ``settle_time`` in the band, and the residual is the time-average vibration over that
+      stay (the settling window).
     * ``u``: torque / torque limit (RunUpTorque) or applied acceleration /
       drive_max_acceleration (RunUpSpeed, DwellProfile).
-    * residual: paid on success, and also at truncation - over the at-speed intervals so far,
-      or at its bound ``w_residual * c / A_op`` if the operating speed was never reached - so a
-      run-up too slow to finish never pays.
+    * residual: paid on success, and also at truncation - over the current stay in the band
+      so far, or at its bound ``w_residual * c / A_op`` if the rotor is not in the band at the
+      end - so a run-up too slow to finish, or parked off the band, never pays.
     * failure: ``R_max = w_vibration c / A_peak + w_time + w_effort u_max^2`` bounds the
       penalty rate of any continuation (the whirl cannot exceed c without failing), so the
       failure term is worse than every way of carrying on: ending early never pays.
@@ -89,8 +95,9 @@ COMMON_DOC = textwrap.dedent(r"""
 
     ## Episode End
 
-    * terminated, success: the rotor has spent ``settle_time`` at operating speed (the
-      settling window; intervals away from the speed do not count).  The residual term is paid.
+    * terminated, success: the rotor has stayed ``settle_time`` in the operating band without
+      a break (the settling window; leaving the band starts the window again).  The residual
+      term is paid.
     * terminated, failure: the whirl radius (measured from the bearing axis, as the scene's
       clearance is) exceeded the housing clearance at an RK4 step, the rotor tripped
       the overspeed limit (RunUpTorque only), or the state became non-finite.  The failure
@@ -113,9 +120,17 @@ COMMON_DOC = textwrap.dedent(r"""
     | vibration_radius | distance of the rotor centre from its rest position [m] |
     | peak_whirl_radius | largest whirl radius so far [m] |
     | ball_angles | ball angles from the imbalance, unwrapped [rad] |
-    | run_up_finished | the operating speed has been reached |
-    | time_to_speed | time it was first reached [s] (0 until then) |
-    | time_at_speed | time spent at operating speed [s] |
+    | first_at_speed | time the band was first reached [s] (inf until then) |
+    | run_up_time | start of the current stay in the band [s] (inf while out): at the end of a
+      completed episode, the settled run-up time |
+    | at_speed | the rotor is in the operating band |
+    | time_at_speed | length of the current stay in the band [s] |
+    | settled | the run-up completed (a stay of settle_time) |
+    | residual_vibration | time-average vibration over the settling window so far [m] (inf
+      before the window has begun) |
+    | peak_vibration | largest vibration before the settled entry [m] |
+    | peak_speed | largest rotor speed so far [rad/s] |
+    | time_above_band | time spent above the band [s] (overspeed) |
     | balanced | residual imbalance within ``balance_tolerance`` of the best the balls can do |
     | residual_imbalance_ratio | abs(U0 + sum m_i (E e^{i gam} + R e^{i ph_i})) / U0 |
     | failure | only on a failure: what happened |
@@ -149,7 +164,8 @@ class BalancerEnv(SetupAccess, gym.Env):
 
     def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,
                  observe_balls: bool = False, render_mode: str | None = None,
-                 max_episode_steps: int | None = None, **overrides: Any):
+                 max_episode_steps: int | None = None, record_history: bool = False,
+                 **overrides: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of "
                              f"{self.metadata['render_modes']} (got {render_mode!r})")
@@ -161,7 +177,9 @@ class BalancerEnv(SetupAccess, gym.Env):
         # one frame per control interval plays back in real time
         self.metadata = dict(self.metadata,
                              render_fps=max(1, round(1.0 / self.setup.control_interval)))
-        self._bufs = Buffers(self.setup, 1, n_trace=1 if render_mode else 0)
+        if not isinstance(record_history, (bool, np.bool_)):
+            raise ValueError(f"record_history must be True or False (got {record_history!r})")
+        self._bufs = Buffers(self.setup, 1, n_trace=1 if (render_mode or record_history) else 0)
         self._renderer: Renderer | None = None
         self._episode: Episode | None = None
         self._done = False
@@ -216,6 +234,12 @@ class BalancerEnv(SetupAccess, gym.Env):
     def observation_names(self) -> list[str]:
         """Names of the observation entries, in order (see the Observation Space table)."""
         return list(self.setup.obs_names)
+
+    def history(self) -> dict[str, np.ndarray]:
+        """The current episode's history (``record_history=True``; see
+        :meth:`abb_gym.envs.setup.Buffers.history`): DwellProfile's one step holds the whole
+        run-up."""
+        return self._bufs.history(0)
 
     @property
     def state(self) -> np.ndarray:
@@ -299,7 +323,8 @@ class BalancerEnv(SetupAccess, gym.Env):
                                       self.setup.episode_length, self.render_mode)
         bf = self._bufs
         if bf.trace.shape[0] == 0:
-            bf.trace = np.zeros((1, self.setup.max_steps + 1, 4))
+            bf.trace = np.zeros((1, self.setup.max_steps + 1,
+                                 T_BALLS + self.setup.scene.ball_count))
             self._bind()
         k = int(self._st_row[S_K]) if self._episode is not None else 0
         return self._renderer.draw(self._s_row, bf.trace[0, :k + 1])

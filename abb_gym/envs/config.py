@@ -114,9 +114,11 @@ class EnvConfig:
     episode_length: float | None = declare(None, unit="s", gt=0.0, le=1e5, nullable=True,
                                            doc="time limit (truncation); null = automatic")
     settle_time: float = declare(1.0, unit="s", ge=0.0, le=1e4,
-                                 doc="time at operating speed that completes an episode")
-    at_speed_tolerance: float = declare(0.01, gt=0.0, le=0.5,
-                                        doc="at operating speed: |w - w_op| <= tol w_op")
+                                 doc="an unbroken stay in the band this long completes the "
+                                     "run-up (the settling window)")
+    at_speed_tolerance: float = declare(0.002, gt=0.0, le=0.5,
+                                        doc="the operating band: at speed when |w - w_op| "
+                                            "<= tol w_op (abb_gym.physics.runup)")
     overspeed: float = declare(1.2, gt=1.0, le=10.0,
                                doc="RunUpTorque trips when |w| > overspeed w_op")
     vibration_filter_time: float = declare(0.05, unit="s", gt=0.0, le=1e3,

@@ -6,18 +6,23 @@ are documented in :mod:`abb_gym.envs.base` (Info).
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
 import numpy as np
 
-from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_K, S_NSETTLE, S_PEAK, S_REACHED,
-                     S_T_REACH, TERM_COLUMNS, TERM_NAMES)
+from ..physics import runup
+from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
+                     TERM_NAMES)
 
 __all__ = ["step_info", "masked", "episode_info"]
 
 # key -> (buffer, column, conversion): the one definition of every per-step key
 #   "value": the entry; "bool": entry != 0; "times_dt": entry x control interval [s];
-#   "per_length": entry / the episode's reference length (Yoshida's W_r / e)
+#   "per_length": entry / the episode's reference length (Yoshida's W_r / e);
+#   "finite": the entry is not NaN;
+#   "or_inf": the entry, inf where the accumulator holds NaN (not reached / not measured: info
+#   holds no NaN, so that equal runs give equal infos)
 STEP_KEYS = {
     "time": ("st", S_K, "times_dt"),
     "rotor_speed": ("s", "rotor_speed", "value"),
@@ -26,9 +31,13 @@ STEP_KEYS = {
     "vibration_radius": ("out", O_RDYN, "value"),
     "peak_whirl_radius": ("st", S_PEAK, "value"),
     "ball_angles": ("s", "ball_angles", "value"),
-    "run_up_finished": ("st", S_REACHED, "bool"),
-    "time_to_speed": ("st", S_T_REACH, "value"),
-    "time_at_speed": ("st", S_NSETTLE, "times_dt"),
+    "first_at_speed": ("st", S_ACC + runup.R_FIRST, "or_inf"),
+    "run_up_time": ("st", S_ACC + runup.R_ENTRY, "or_inf"),
+    "at_speed": ("st", S_ACC + runup.R_ENTRY, "finite"),
+    "time_at_speed": ("st", S_ACC + runup.R_STAY, "value"),
+    "settled": ("st", S_ACC + runup.R_SETTLED, "bool"),
+    "peak_speed": ("st", S_ACC + runup.R_PEAK_SPEED, "value"),
+    "time_above_band": ("st", S_ACC + runup.R_OVER_T, "value"),
     "balanced": ("out", O_BAL, "bool"),
     "residual_imbalance_ratio": ("out", O_IMB, "value"),
 }
@@ -59,11 +68,28 @@ def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len) ->
                 v = v.copy()
         if conv == "bool":
             v = v != 0.0
+        elif conv == "finite":
+            v = (v == v)  # not NaN
+        elif conv == "or_inf":
+            v = (math.inf if v != v else v) if single else np.where(v != v, np.inf, v)
         elif conv == "times_dt":
             v = v * dt
         elif conv == "per_length":
             v = v / ref_len
         info[key] = v
+    # the accumulator's derived values: residual over the settling window so far [m] and the
+    # peak vibration before the settled entry [m] (abb_gym.physics.runup)
+    res_int = bufs["st"][S_ACC + runup.R_RES_INT]
+    res_t = bufs["st"][S_ACC + runup.R_RES_T]
+    peak = bufs["st"][S_ACC + runup.R_PEAK]
+    peak_entry = bufs["st"][S_ACC + runup.R_PEAK_ENTRY]
+    if single:
+        info["residual_vibration"] = res_int / res_t if res_t > 0.0 else math.inf
+        info["peak_vibration"] = peak if math.isnan(peak_entry) else peak_entry
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            info["residual_vibration"] = np.where(res_t > 0.0, res_int / res_t, np.inf)
+        info["peak_vibration"] = np.where(np.isnan(peak_entry), peak, peak_entry)
     code = bufs["out"][O_FCODE]
     if single:
         if code:

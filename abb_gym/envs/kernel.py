@@ -23,7 +23,7 @@ import math
 
 from numba import njit, prange
 
-from ..physics import batch, rotor
+from ..physics import batch, rotor, runup
 from ..physics import drive_law as dl
 from . import actions
 from .layout import *  # noqa: F401,F403  (the column names are the kernel's vocabulary)
@@ -79,17 +79,26 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace):
     if i < trace.shape[0]:
         k = int(st[i, S_K])
         if k < trace.shape[1]:
-            trace[i, k, 0] = k * cfg[C_DT]
-            trace[i, k, 1] = x
-            trace[i, k, 2] = y
-            trace[i, k, 3] = w
+            row = trace[i, k]
+            row[T_T] = k * cfg[C_DT]
+            row[T_X] = x
+            row[T_Y] = y
+            row[T_W] = w
+            # the interval's mean and largest vibration (at k = 0: the rest state's)
+            row[T_VIB] = out[i, O_WINT] / cfg[C_DT] if k > 0 else out[i, O_RDYN]
+            row[T_VIBMAX] = out[i, O_WDMAX] if k > 0 else out[i, O_RDYN]
+            for kb in range(nb):
+                row[T_BALLS + kb] = s[i, 3 + kb]
 
 
 @njit(cache=True)
 def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     """Advance environment ``i`` by one control interval and add its reward terms to ``out``.
 
-    Returns True when the episode ended (terminated or truncated) in this interval.
+    The run-up metrics (:mod:`abb_gym.physics.runup`: the operating band, the settled entry,
+    the residual over the settling window) are updated here with the interval's vibration;
+    the reward's time and residual terms and the success condition read them.  Returns True
+    when the episode ended (terminated or truncated) in this interval.
     """
     nq = s.shape[1] // 2
     dt = cfg[C_DT]
@@ -101,11 +110,12 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     backup = wsi[batch.WS_BACKUP]
     for c in range(si.shape[0]):
         backup[c] = si[c]
-    whirl = out[i, O_WINT:O_WYS + 1]
+    whirl = out[i, O_WINT:O_WDMAX + 1]
     whirl[0] = 0.0
     whirl[1] = 0.0
     whirl[2] = st[i, S_XS]
     whirl[3] = st[i, S_YS]
+    whirl[4] = 0.0
     nseg = int(st[i, S_NSEG])
     status, j, t_fail, bad, steps = batch.advance(si, t0, t1, d[i], nseg, int(st[i, S_J]),
                                                   p[i], b[i], st[i, S_DTMAX], wsi, work[i],
@@ -113,6 +123,9 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     st[i, S_J] = j
     out[i, O_STEPS] += steps
     st[i, S_K] = kk + 1.0
+    acc = st[i, S_ACC:S_ACC + runup.N_ACC]
+    wop = cfg[C_WOP]
+    band = cfg[C_BAND]
     fail = FAIL_NONE
     if status != 0:
         for c in range(si.shape[0]):
@@ -124,9 +137,12 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
         dy = si[1] - st[i, S_YS]
         r_mean = math.sqrt(dx * dx + dy * dy)
         r_max = math.sqrt(si[0] * si[0] + si[1] * si[1])
+        at_speed = runup.in_band(si[nq + 2], wop, band)
     else:
         r_mean = whirl[0] / dt
         r_max = whirl[1]
+        at_speed = runup.update(acc, t0, t1, si[nq + 2], whirl[0], whirl[4], wop, band,
+                                cfg[C_SETTLE])
     w = si[nq + 2]
     # control effort: time integral of (drive command / its limit)^2 over the interval
     effort = 0.0
@@ -142,19 +158,11 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
             effort += u * u * ov
     tref = cfg[C_TREF]
     vib = -cfg[C_WV] * (r_mean / st[i, S_AREF]) * dt / tref
-    wop = cfg[C_WOP]
-    at_speed = abs(w - wop) <= cfg[C_TOL] * wop
     tim = 0.0 if at_speed else -cfg[C_WT] * dt / tref
     eff = -cfg[C_WE] * effort / tref
     st[i, S_FILT] += cfg[C_FILT] * (r_mean - st[i, S_FILT])
     if r_max > st[i, S_PEAK]:
         st[i, S_PEAK] = r_max
-    if at_speed and fail == FAIL_NONE:
-        if st[i, S_REACHED] == 0.0:
-            st[i, S_REACHED] = 1.0
-            st[i, S_T_REACH] = t1
-        st[i, S_NSETTLE] += 1.0
-        st[i, S_RES_SUM] += r_mean / st[i, S_AOP]
     if fail == FAIL_NONE:
         if r_max > cfg[C_CLEAR]:
             fail = FAIL_CLEARANCE
@@ -172,17 +180,17 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
         out[i, O_FCODE] = fail
         if fail != FAIL_NUMERICAL:
             out[i, O_FTIME] = t1
-    elif st[i, S_REACHED] != 0.0 and st[i, S_NSETTLE] >= cfg[C_NSETTLE]:
+    elif acc[runup.R_SETTLED] != 0.0:
         term = True
-        if st[i, S_NSETTLE] > 0.0:
-            resid = -cfg[C_WR] * st[i, S_RES_SUM] / st[i, S_NSETTLE]
+        resid = -cfg[C_WR] * runup.residual(acc) / st[i, S_AOP]
     trunc = (not term) and st[i, S_K] >= cfg[C_NMAX]
     if trunc:
         # the time limit does not excuse the residual term: it is paid over the settling
-        # window so far, or at its bound (the whirl at the clearance) if the rotor never
-        # reached operating speed, so that a run-up too slow to finish never pays
-        if st[i, S_NSETTLE] > 0.0:
-            resid = -cfg[C_WR] * st[i, S_RES_SUM] / st[i, S_NSETTLE]
+        # window so far if the rotor is in the band, else at its bound (the whirl at the
+        # clearance), so that a run-up too slow to finish, or parked off the band, never pays
+        res = runup.residual(acc)
+        if at_speed and math.isfinite(res):
+            resid = -cfg[C_WR] * res / st[i, S_AOP]
         else:
             resid = -st[i, S_PEN_TERM]
     out[i, O_VIB] += vib

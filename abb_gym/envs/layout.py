@@ -5,25 +5,33 @@ Every environment keeps its state in preallocated arrays with one row per enviro
 
 * ``cfg`` (``N_CFG``): constants of the environment (``C_*``), the same for every row;
 * ``st`` (``N_ST``): per-environment episode bookkeeping (``S_*``);
-* ``out`` (``N_OUT``): per-step outputs (``O_*``): reward terms, flags, whirl, balance.
+* ``out`` (``N_OUT``): per-step outputs (``O_*``): reward terms, flags, whirl, balance;
+* ``trace`` (``T_*``): the recorded history, one row per control interval.
 """
 from __future__ import annotations
 
+from ..physics.runup import N_ACC
+
 # ---------------------------------------------------------------- cfg: environment constants
-(C_KIND, C_DT, C_WOP, C_TOL, C_OVERSPEED, C_TLIM, C_AMAX, C_CLEAR, C_VSCALE, C_FILT,
- C_NSETTLE, C_NMAX, C_BACKSTOP, C_TREF, C_WV, C_WT, C_WE, C_WR, C_WF, C_NACT, C_OBS_BALLS,
+(C_KIND, C_DT, C_WOP, C_BAND, C_OVERSPEED, C_TLIM, C_AMAX, C_CLEAR, C_VSCALE, C_FILT,
+ C_SETTLE, C_NMAX, C_BACKSTOP, C_TREF, C_WV, C_WT, C_WE, C_WR, C_WF, C_NACT, C_OBS_BALLS,
  C_SPEED_LO, C_SPEED_HI, C_VIB_HI, C_BAL_TOL, C_TEP, C_METHOD) = range(27)
 N_CFG = 27
 # ---------------------------------------------------------------- st: per-environment state
-(S_K, S_FILT, S_NSETTLE, S_REACHED, S_T_REACH, S_RES_SUM, S_PEAK, S_DONE, S_TERM, S_TRUNC,
- S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX, S_NSEG, S_J, S_PEN_RATE, S_PEN_TERM, S_XS, S_YS,
- S_ACT) = range(22)
-N_ST = S_ACT + 3  # up to three action entries
+# S_ACC .. S_ACC + runup.N_ACC - 1: the run-up metrics accumulator (abb_gym.physics.runup)
+(S_K, S_FILT, S_PEAK, S_DONE, S_TERM, S_TRUNC, S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX,
+ S_NSEG, S_J, S_PEN_RATE, S_PEN_TERM, S_XS, S_YS, S_ACT) = range(18)
+S_ACC = S_ACT + 3  # up to three action entries
+N_ST = S_ACC + N_ACC
 # ---------------------------------------------------------------- out: per-step outputs
 (O_REWARD, O_VIB, O_TIME, O_EFFORT, O_RESID, O_FAIL, O_TERM, O_TRUNC, O_FCODE, O_FTIME,
  O_FINDEX, O_R, O_RDYN, O_IMB, O_BAL, O_ACTFLAG, O_STEPS, O_WINT, O_WMAX, O_WXS,
- O_WYS) = range(21)
-N_OUT = 21
+ O_WYS, O_WDMAX) = range(22)
+N_OUT = 22
+# ---------------------------------------------------------------- trace: per-interval history
+# one row per control interval (row k: the state at t = k dt) when a history is recorded
+(T_T, T_X, T_Y, T_W, T_VIB, T_VIBMAX) = range(6)
+T_BALLS = 6  # ball angles from here on
 TERM_NAMES = ("vibration", "time", "effort", "residual", "failure")
 TERM_COLUMNS = (O_VIB, O_TIME, O_EFFORT, O_RESID, O_FAIL)
 

@@ -20,18 +20,19 @@ from ..physics import batch
 from ..physics import drive_law as dl
 from ..physics import integrators as integ
 from ..physics import model as mdl
-from ..physics import rotor
+from ..physics import rotor, runup
 from ..physics.scene import Scene, load_scene
 from ..physics.simulate import default_step, state_names
 from .actions import ActionModel, action_model
 from .config import EnvConfig, PresetError, load_preset
 from .kernel import observe_rows
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_CLEAR, C_DT, C_FILT, C_KIND, C_METHOD,
-                     C_NACT, C_NMAX, C_NSETTLE, C_OBS_BALLS, C_OVERSPEED, C_SPEED_HI,
-                     C_SPEED_LO, C_TEP, C_TLIM, C_TOL, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF,
+                     C_NACT, C_NMAX, C_SETTLE, C_OBS_BALLS, C_OVERSPEED, C_SPEED_HI,
+                     C_SPEED_LO, C_TEP, C_TLIM, C_BAND, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF,
                      C_WOP, C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED,
                      N_CFG, N_OUT, N_ST, O_FINDEX, O_FTIME, S_AOP, S_AREF, S_DONE, S_DTMAX,
-                     S_NSEG, S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_XS, S_YS)
+                     S_ACC, S_NSEG, S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_K, S_XS, S_YS, T_BALLS, T_T, T_VIB, T_VIBMAX, T_W,
+                     T_X, T_Y)
 
 __all__ = ["EnvSetup", "Episode", "Buffers", "RESET_OPTIONS", "SetupAccess"]
 
@@ -79,7 +80,7 @@ class Buffers:
         self.obs = np.zeros((n, setup.obs_dim), dtype=np.float32)
         self.out = np.zeros((n, N_OUT))
         k = setup.max_steps + 1 if n_trace > 0 else 0
-        self.trace = np.zeros((min(n_trace, n), k, 4))
+        self.trace = np.zeros((min(n_trace, n), k, T_BALLS + nb))
         self.ws, self.work = batch.make_workspace(n, nb)
         self.active = np.ones(n, dtype=np.uint8)
         self.cfg = setup.cfg
@@ -88,6 +89,19 @@ class Buffers:
         """Arguments of :func:`step_serial` / :func:`step_parallel`, in order."""
         return (self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs, self.out,
                 self.trace, self.ws, self.work, self.active)
+
+    def history(self, i: int) -> dict[str, np.ndarray]:
+        """Row ``i``'s recorded history so far, one entry per control interval boundary
+        (``t`` [s], ``x``, ``y`` [m], ``rotor_speed`` [rad/s], ``vibration`` (the interval's
+        mean) and ``vibration_max`` [m], ``ball_angles`` [rad] (T, n)); needs a buffer built
+        with a trace for that row (``record_history=True``)."""
+        if i >= self.trace.shape[0]:
+            raise ValueError("no history is recorded: create the environment with "
+                             "record_history=True")
+        rows = self.trace[i, :int(self.st[i, S_K]) + 1]
+        return {"t": rows[:, T_T].copy(), "x": rows[:, T_X].copy(), "y": rows[:, T_Y].copy(),
+                "rotor_speed": rows[:, T_W].copy(), "vibration": rows[:, T_VIB].copy(),
+                "vibration_max": rows[:, T_VIBMAX].copy(), "ball_angles": rows[:, T_BALLS:].copy()}
 
     def observe(self, rows: np.ndarray) -> None:
         observe_rows(np.asarray(rows, dtype=np.int64), self.s, self.p, self.b, self.st,
@@ -171,14 +185,14 @@ class EnvSetup:
         c[C_KIND] = am.kind_id
         c[C_DT] = self.control_interval
         c[C_WOP] = self.operating_speed
-        c[C_TOL] = cfg.at_speed_tolerance
+        c[C_BAND] = cfg.at_speed_tolerance
         c[C_OVERSPEED] = am.overspeed_trip(cfg)
         c[C_TLIM] = self.torque_limit
         c[C_AMAX] = self.max_acceleration
         c[C_CLEAR] = sc.housing_clearance
         c[C_VSCALE] = self.vibration_scale
         c[C_FILT] = 1.0 - math.exp(-self.control_interval / cfg.vibration_filter_time)
-        c[C_NSETTLE] = self.settle_steps
+        c[C_SETTLE] = self.settle_steps * self.control_interval
         c[C_NMAX] = self.max_steps
         c[C_BACKSTOP] = self.backstop
         c[C_TREF] = self.reference_time
@@ -280,6 +294,7 @@ class EnvSetup:
         s[3:nq] = ep.ball_angles
         st = bufs.st[i]
         st[:] = 0.0
+        runup.reset(st[S_ACC:S_ACC + runup.N_ACC])
         st[S_XS] = xs
         st[S_YS] = ys
         u_ref = rotor.imbalance_scale(sc)

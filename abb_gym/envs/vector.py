@@ -79,7 +79,8 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
 
     def __init__(self, num_envs: int = 1, scene: Any = "yoshida_odd", preset: Any = "train", *,
                  observe_balls: bool = False, render_mode: str | None = None,
-                 max_episode_steps: int | None = None, **overrides: Any):
+                 max_episode_steps: int | None = None, record_history: bool = False,
+                 **overrides: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
@@ -94,7 +95,10 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         self.single_action_space = self.setup.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        n_trace = min(self.num_envs, MAX_RENDERED) if render_mode else 0
+        if not isinstance(record_history, (bool, np.bool_)):
+            raise ValueError(f"record_history must be True or False (got {record_history!r})")
+        n_trace = (self.num_envs if record_history
+                   else min(self.num_envs, MAX_RENDERED) if render_mode else 0)
         self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace)
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self._episodes: list[Episode | None] = [None] * self.num_envs
@@ -112,10 +116,19 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         state["_renderers"] = None
         return state
 
+    def episode(self, i: int):
+        """Sub-environment ``i``'s current episode parameters (:class:`Episode`)."""
+        return self._episodes[i]
+
     def episode_scene(self, i: int):
         """Sub-environment ``i``'s current episode as a Scene."""
         ep = self._episodes[i]
         return None if ep is None else ep.scene
+
+    def history(self, i: int) -> dict[str, np.ndarray]:
+        """Sub-environment ``i``'s history in its current episode (``record_history=True``;
+        see :meth:`abb_gym.envs.setup.Buffers.history`)."""
+        return self._bufs.history(i)
 
     @property
     def states(self) -> np.ndarray:

@@ -7,10 +7,11 @@ order, whatever the number of sub-environments, workers or executor.
 
 Episodes run in chunks (one executor task per chunk; a chunk is one native vector
 environment with a sub-environment per episode, stepped until every episode has ended once).
-Per episode the metrics of :mod:`abb_gym.evaluation.metrics` are computed from the recorded
-histories, plus the return.  Drive energy: exact ``int |T w| dt`` on RunUpTorque (T = action
-x torque limit); on RunUpSpeed an estimate with the rigid spinning inertia,
-``int |(J_spin a + b_0 w) w| dt``; not defined for DwellProfile (NaN).
+Per episode the metrics of :mod:`abb_gym.evaluation.metrics` come from the environment's
+run-up accumulator (the quantities its reward uses) and its recorded history (one entry per
+control interval, also for DwellProfile's single step), plus the return.  Drive energy: exact
+``int |T w| dt`` on RunUpTorque (T = action x torque limit); elsewhere an estimate with the
+rigid spinning inertia, ``int |(J_spin a + b_0 w) w| dt``.
 
 :func:`summarise` gives means with 95 % confidence intervals (Student t for means, Wilson
 score for shares).
@@ -26,18 +27,14 @@ import numpy as np
 from tqdm import tqdm
 
 from ..physics.rotor import spinning_inertia
-from .metrics import metrics_from_arrays
-from .statistics import mean_ci, share_ci
+from . import metrics as mt
 from .registry import Policy, resolve
+from .statistics import mean_ci, share_ci
 
-METRICS = ("time_to_speed", "peak_whirl", "residual_vibration", "ball_settling_time",
-           "balanced", "nonsynchronous_whirl", "drive_energy", "return")
-SHARES = ("balanced", "nonsynchronous_whirl")
-NONNEGATIVE = ("time_to_speed", "peak_whirl", "residual_vibration", "ball_settling_time",
-               "drive_energy")
-UNITS = {"time_to_speed": "s", "peak_whirl": "W_r/e", "residual_vibration": "W_r/e",
-         "ball_settling_time": "s", "balanced": "share", "nonsynchronous_whirl": "share",
-         "drive_energy": "J", "return": "-"}
+UNITS = {**mt.METRICS, "return": "-"}
+METRICS = tuple(UNITS)
+SHARES = tuple(k for k, u in UNITS.items() if u == "share")
+NONNEGATIVE = tuple(k for k in METRICS if k not in SHARES and k != "return")
 
 
 @dataclass(frozen=True)
@@ -84,8 +81,9 @@ class EvaluationResult:
 
 
 def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
+    """The native vector environment of a chunk, recording every sub-environment's history."""
     return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        scene=scene, preset=preset, **env_kwargs)
+                        scene=scene, preset=preset, record_history=True, **env_kwargs)
 
 
 def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]]:
@@ -100,64 +98,53 @@ def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]
         policy = resolve(chunk.policy, chunk.env_id, chunk.scene)
     elif not hasattr(policy, "act"):
         policy = policy(env)
-    setup = env.unwrapped.setup
+    native = env.unwrapped
+    setup = native.setup
     obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices])
     policy.reset(env, np.ones(n, bool))
-    hist: dict[str, list] = {k: [] for k in ("t", "w", "ratio", "angles", "act")}
-    first = {"t": np.zeros(n), "w": np.zeros(n), "ratio": np.asarray(info["whirl_ratio"], float),
-             "angles": np.asarray(info["ball_angles"], float)}
+    actions = np.zeros((setup.max_steps + 1, n, setup.n_actions))
+    counts = np.zeros(n, dtype=np.int64)
     ret = np.zeros(n)
     done = np.zeros(n, bool)
-    steps = np.zeros(n, int)
-    final: dict[str, np.ndarray] = {}
+    episodes, rollouts = [None] * n, {}
+    name = getattr(policy, "name", chunk.policy)
     while not done.all():
         act = np.asarray(policy.act(obs, info), dtype=np.float32)
         obs, reward, term, trunc, info = env.step(act)
         live = ~done
         ret[live] += reward[live]
-        steps[live] += 1
-        hist["t"].append(np.asarray(info["time"], float))
-        hist["w"].append(np.asarray(info["rotor_speed"], float))
-        hist["ratio"].append(np.asarray(info["whirl_ratio"], float))
-        hist["angles"].append(np.asarray(info["ball_angles"], float))
-        hist["act"].append(act.reshape(n, -1).astype(float))
-        ended = live & (term | trunc)
-        for key in ("residual_imbalance_ratio", "balanced"):
-            final.setdefault(key, np.zeros(n))
-            final[key][ended] = np.asarray(info[key], float)[ended]
-        done |= ended
+        actions[np.minimum(counts, setup.max_steps), np.arange(n)] = act.reshape(n, -1)
+        counts += live
+        for j in np.flatnonzero(live & (term | trunc)):
+            k = chunk.indices[j]
+            hist = native.history(int(j))
+            act_j = actions[:counts[j], j].copy()
+            final = {key: (v[j] if isinstance(v, np.ndarray) else v) for key, v in info.items()
+                     if not key.startswith("_") and key != "reward_terms"}
+            ref_len = native.episode_scene(int(j)).reference_length
+            row = mt.rollout_metrics(setup, final, hist, ref_len,
+                                     torque=_drive_torque(setup, hist["t"], hist["rotor_speed"],
+                                                          act_j))
+            row.update(episode=k, seed=chunk.seed + k, policy=name, steps=len(act_j),
+                       **{"return": float(ret[j])})
+            episodes[j] = row
+            if k in chunk.record and k not in rollouts:
+                xs, ys = native.episode(int(j)).static_deflection
+                vib = np.hypot(hist["x"] - xs, hist["y"] - ys)
+                rollouts[k] = Rollout(setup.scene, hist["t"], hist["rotor_speed"],
+                                      vib / ref_len, hist["ball_angles"], act_j)
+        done |= live & (term | trunc)
     env.close()
-    arrays = {k: np.stack(v) for k, v in hist.items()}  # (T, n, ...)
-    episodes, rollouts = [], {}
-    for j, k in enumerate(chunk.indices):
-        m = steps[j]
-        t = np.concatenate([[0.0], arrays["t"][:m, j]])
-        w = np.concatenate([[0.0], arrays["w"][:m, j]])
-        ratio = np.concatenate([[first["ratio"][j]], arrays["ratio"][:m, j]])
-        angles = np.concatenate([first["angles"][j][None], arrays["angles"][:m, j]])
-        act = arrays["act"][:m, j]
-        torque = _drive_torque(setup, t, w, act)
-        row = metrics_from_arrays(
-            t, w, ratio, angles, operating_speed=setup.operating_speed,
-            critical_speed=setup.scene.critical_speed,
-            residual_imbalance=float(final["residual_imbalance_ratio"][j]),
-            balanced=bool(final["balanced"][j]), torque=torque,
-            settle_window=setup.config.settle_time)
-        row.update(episode=k, seed=chunk.seed + k, policy=getattr(policy, "name", chunk.policy),
-                   steps=int(m), **{"return": float(ret[j])})
-        episodes.append(row)
-        if k in chunk.record and k not in rollouts:
-            rollouts[k] = Rollout(setup.scene, t, w, ratio, angles, act)
     return episodes, rollouts
 
 
 def _drive_torque(setup, t, w, act):
+    """Motor torque [N m] at the history's samples: the command on RunUpTorque, else the rigid
+    spinning-inertia estimate ``J_spin w' + b_0 w``."""
     if setup.kind == "torque":
-        return np.concatenate([[0.0], act[:, 0] * setup.torque_limit])
-    if setup.kind == "speed":
-        accel = np.gradient(w, t) if len(t) > 1 else np.zeros_like(w)
-        return spinning_inertia(setup.scene) * accel + setup.scene.bearing_drag * w
-    return None
+        return np.concatenate([[0.0], act[:len(t) - 1, 0] * setup.torque_limit])
+    accel = np.gradient(w, t) if len(t) > 1 else np.zeros_like(w)
+    return spinning_inertia(setup.scene) * accel + setup.scene.bearing_drag * w
 
 
 def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, preset: str = "test",

@@ -1,97 +1,155 @@
-"""Run-up metrics from sampled time histories (a :class:`Trajectory` or an environment rollout).
+"""Run-up metrics of one run, for ``simulate`` trajectories and environment rollouts alike.
 
-All functions take plain arrays so that ``simulate`` trajectories and environment rollouts are
-scored by the same code:
+The run-up metrics proper (operating band, settled entry, residual over the settling window,
+peak vibration, overspeed) are :mod:`abb_gym.physics.runup`'s, computed by the one
+accumulator that the environments update in their compiled step: an environment rollout
+reads its final state (:func:`rollout_metrics`), a trajectory streams its samples through it
+(:func:`runup_metrics`).  The metrics that need the whole history (ball settling,
+non-synchronous whirl, drive energy) are computed here from the recorded arrays, with the
+same functions for both.
 
-=============================  ===========  ====================================================
-metric                         unit         definition
-=============================  ===========  ====================================================
-``time_to_speed``              s            first time the rotor speed reaches 99 % of the
-                                            operating speed (NaN if never)
-``peak_whirl``                 -            largest W_r / e before the operating speed is reached
-``residual_vibration``         -            mean W_r / e over the last ``settle_window`` s
-``ball_settling_time``         s            time after reaching the operating speed until every
-                                            ball angle stays within ``angle_tol`` of its final
-                                            value (NaN if never at speed)
-``residual_imbalance``         -            |U0 + sum m_i (E e^(i gam) + R e^(i ph_i))| / U0 at
-                                            the end, the imbalance the balls leave uncancelled
-                                            (:mod:`abb_gym.physics.rotor`: the scale is U0
-                                            unless it is 0)
-``balanced``                   bool         residual imbalance within ``balance_tol`` U0 of the
-                                            best the balls can reach (unequal balls and race
-                                            eccentricity included: :func:`rotor.best_residual`)
-``nonsynchronous_whirl``       bool         after the critical speed, some ball slips more than
-                                            a full revolution (2 pi) behind the rotor: it
-                                            circulates instead of settling
-``drive_energy``               J            integral of |T w| dt (when the torque is known)
-=============================  ===========  ====================================================
+========================  =======  ===============================================================
+metric                    unit     definition
+========================  =======  ===============================================================
+``run_up_time``           s        settled entry: start of the final stay in the operating band
+                                   (a run that never settles: the end of the run, a failure)
+``first_at_speed``        s        first time the rotor speed entered the band (NaN if never)
+``at_speed``              bool     the run-up completed: an unbroken stay of ``settle_time`` in
+                                   the band (a share over a test set)
+``residual_vibration``    W_r/e    time-average vibration over the settling window, divided by
+                                   the reference length e (NaN if the run never settled)
+``peak_whirl``            W_r/e    largest vibration before the settled entry
+``peak_speed``            w_op     largest rotor speed / operating speed
+``time_above_band``       s        time spent above the operating band (overspeed)
+``ball_settling_time``    s        time after the settled entry until every ball angle stays
+                                   within ``angle_tol`` of its final value (NaN if never)
+``residual_imbalance``    -        ``|U0 + sum m_i (E e^(i gam) + R e^(i ph_i))|`` / U0 at the
+                                   end (:mod:`abb_gym.physics.rotor`)
+``balanced``              bool     residual imbalance within ``balance_tol`` U0 of the best the
+                                   balls can reach (unequal balls and race eccentricity included)
+``nonsynchronous_whirl``  bool     after the critical speed some ball slips more than a full
+                                   revolution behind the rotor: it circulates, not settles
+``drive_energy``          J        integral of ``|T w| dt`` (when the torque is known)
+========================  =======  ===============================================================
+
+"Vibration" is the distance of the rotor centre from its rest position (the bearing axis, or
+the static sag under gravity); the operating band and the settling window are those of the
+environment preset (trajectories: ``band`` and ``settle_time``, defaults
+:data:`abb_gym.physics.runup.BAND` and :data:`~abb_gym.physics.runup.SETTLE_TIME`).
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
-from ..physics import rotor
+from ..physics import rotor, runup
 from ..physics.scene import Scene
 
-SPEED_FRACTION = 0.99
+__all__ = ["METRICS", "runup_metrics", "trajectory_metrics", "rollout_metrics",
+           "history_metrics", "nonsynchronous_whirl", "drive_energy"]
+
+#: metric -> unit, in table order
+METRICS = {"run_up_time": "s", "first_at_speed": "s", "at_speed": "share",
+           "residual_vibration": "W_r/e", "peak_whirl": "W_r/e", "peak_speed": "w_op",
+           "time_above_band": "s", "ball_settling_time": "s", "residual_imbalance": "U0",
+           "balanced": "share", "nonsynchronous_whirl": "share", "drive_energy": "J"}
+ANGLE_TOL = math.radians(2.0)
 
 
-def runup_metrics(scene: Scene, t, rotor_speed, whirl_radius, ball_angles,
-                  operating_speed: float | None = None, torque=None,
-                  settle_window: float = 0.5, angle_tol: float = math.radians(2.0),
-                  balance_tol: float = 0.1) -> dict[str, Any]:
-    """The metrics of the module docstring for one run of ``scene``."""
+def _from_accumulator(acc: Mapping[str, Any], end_time: float, operating_speed: float,
+                      reference_length: float) -> dict[str, Any]:
+    settled = bool(acc["settled"])
+    first = float(acc["first_at_speed"])
+    return {
+        "run_up_time": float(acc["run_up_time"]) if settled else float(end_time),
+        "first_at_speed": first if math.isfinite(first) else math.nan,
+        "at_speed": settled,
+        "residual_vibration": (float(acc["residual_vibration"]) / reference_length
+                               if settled else math.nan),
+        "peak_whirl": float(acc["peak_vibration"]) / reference_length,
+        "peak_speed": float(acc["peak_speed"]) / operating_speed,
+        "time_above_band": float(acc["time_above_band"]),
+    }
+
+
+def history_metrics(t, rotor_speed, ball_angles, run_up_time: float, settled: bool,
+                    critical_speed: float, angle_tol: float = ANGLE_TOL) -> dict[str, Any]:
+    """Ball settling time after the settled entry and the non-synchronous whirl flag."""
+    t = np.asarray(t, float)
     angles = np.asarray(ball_angles, float).reshape(len(t), -1)
-    residual = rotor.residual_imbalance(scene, angles[-1])
+    settle = math.nan
+    if settled:
+        k0 = int(np.searchsorted(t, run_up_time - 1e-9))
+        dev = np.max(np.abs(angles - angles[-1]), axis=1) > angle_tol
+        late = np.nonzero(dev[k0:])[0]
+        settle = 0.0 if late.size == 0 else float(t[k0 + late[-1]] - t[k0])
+        if late.size and k0 + late[-1] == len(t) - 1:
+            settle = math.nan  # still moving at the end
+    return {"ball_settling_time": settle,
+            "nonsynchronous_whirl": _slips(t, rotor_speed, angles, critical_speed, None)}
+
+
+def drive_energy(t, rotor_speed, torque) -> float:
+    """``int |T w| dt`` [J] (NaN without a torque history)."""
+    if torque is None:
+        return math.nan
+    return float(np.trapezoid(np.abs(np.asarray(torque, float) * np.asarray(rotor_speed)), t))
+
+
+def _imbalance(scene: Scene, final_angles, balance_tol: float) -> dict[str, Any]:
+    residual = rotor.residual_imbalance(scene, final_angles)
     scale = rotor.imbalance_scale(scene)
-    return metrics_from_arrays(
-        t, rotor_speed, np.asarray(whirl_radius, float) / scene.reference_length, angles,
-        operating_speed=scene.drive_operating_speed if operating_speed is None
-        else operating_speed, critical_speed=scene.critical_speed,
-        residual_imbalance=residual / scale,
-        balanced=rotor.is_balanced(residual, rotor.best_residual(scene), balance_tol, scale),
-        torque=torque, settle_window=settle_window, angle_tol=angle_tol)
+    return {"residual_imbalance": float(residual / scale),
+            "balanced": bool(rotor.is_balanced(residual, rotor.best_residual(scene),
+                                               balance_tol, scale))}
 
 
-def metrics_from_arrays(t, rotor_speed, whirl_ratio, ball_angles, *, operating_speed: float,
-                        critical_speed: float, residual_imbalance: float, balanced: bool,
-                        torque=None, settle_window: float = 0.5,
-                        angle_tol: float = math.radians(2.0)) -> dict[str, Any]:
-    """The metrics from sampled histories: time [s], rotor speed [rad/s], W_r / e, ball
-    angles [rad] (T, n), and the end-of-run residual imbalance / U0 and balanced flag (which
-    the caller computes from the episode's machine)."""
+def runup_metrics(scene: Scene, t, rotor_speed, x, y, ball_angles,
+                  operating_speed: float | None = None, torque=None,
+                  band: float = runup.BAND, settle_time: float = runup.SETTLE_TIME,
+                  interval: float | None = None, angle_tol: float = ANGLE_TOL,
+                  balance_tol: float = 0.1) -> dict[str, Any]:
+    """The metrics of the module docstring for a sampled run of ``scene`` (times [s], rotor
+    speeds [rad/s], rotor-centre x, y [m], ball angles [rad], optional motor torque [N m]).
+    ``interval`` [s]: check the band every ``interval`` (an environment's control interval)
+    instead of at every sample (:func:`abb_gym.physics.runup.stream_metrics`)."""
     t = np.asarray(t, float)
     w = np.asarray(rotor_speed, float)
-    ratio = np.asarray(whirl_ratio, float)
+    xs, ys = rotor.static_deflection(scene)
+    vib = np.hypot(np.asarray(x, float) - xs, np.asarray(y, float) - ys)
+    wop = scene.drive_operating_speed if operating_speed is None else float(operating_speed)
+    acc = runup.stream_metrics(t, w, vib, wop, band, settle_time, interval)
+    out = _from_accumulator(acc, t[-1], wop, scene.reference_length)
     angles = np.asarray(ball_angles, float).reshape(len(t), -1)
-    reached = np.nonzero(w >= SPEED_FRACTION * operating_speed)[0]
-    k_reach = int(reached[0]) if reached.size else None
-    t_reach = float(t[k_reach]) if k_reach is not None else math.nan
-    runup = ratio[: k_reach + 1] if k_reach is not None else ratio
-    tail = t >= t[-1] - settle_window
-    settle = math.nan
-    if k_reach is not None:
-        dev = np.max(np.abs(angles - angles[-1]), axis=1) > angle_tol
-        late = np.nonzero(dev[k_reach:])[0]
-        settle = 0.0 if late.size == 0 else float(t[k_reach + late[-1]] - t[k_reach])
-        if late.size and k_reach + late[-1] == len(t) - 1:
-            settle = math.nan  # still moving at the end
-    energy = math.nan
-    if torque is not None:
-        energy = float(np.trapezoid(np.abs(np.asarray(torque, float) * w), t))
-    return {
-        "time_to_speed": t_reach,
-        "peak_whirl": float(runup.max()),
-        "residual_vibration": float(np.mean(ratio[tail])),
-        "ball_settling_time": settle,
-        "residual_imbalance": float(residual_imbalance),
-        "balanced": bool(balanced),
-        "nonsynchronous_whirl": _slips(t, w, angles, critical_speed, None),
-        "drive_energy": energy,
-    }
+    out.update(history_metrics(t, w, angles, out["run_up_time"], out["at_speed"],
+                               scene.critical_speed, angle_tol))
+    out.update(_imbalance(scene, angles[-1], balance_tol))
+    out["drive_energy"] = drive_energy(t, w, torque)
+    return out
+
+
+def trajectory_metrics(tr, **kwargs) -> dict[str, Any]:
+    """:func:`runup_metrics` of a :class:`~abb_gym.physics.simulate.Trajectory`."""
+    return runup_metrics(tr.scene, tr.t, tr.rotor_speed, tr.x, tr.y, tr.ball_angles,
+                         torque=tr.motor_torque, **kwargs)
+
+
+def rollout_metrics(setup, final_info: Mapping[str, Any], history: Mapping[str, np.ndarray],
+                    reference_length: float, torque=None) -> dict[str, Any]:
+    """The metrics of one environment episode: the run-up metrics from the accumulator's
+    final state in ``final_info`` (the info of the episode's last step, one row), the rest
+    from ``history`` (arrays ``t``, ``rotor_speed``, ``ball_angles`` per control interval).
+    ``reference_length``: the episode's e [m] (W_r/e)."""
+    out = _from_accumulator(final_info, final_info["time"], setup.operating_speed,
+                            reference_length)
+    out.update(history_metrics(history["t"], history["rotor_speed"], history["ball_angles"],
+                               out["run_up_time"], out["at_speed"], setup.scene.critical_speed))
+    out["residual_imbalance"] = float(final_info["residual_imbalance_ratio"])
+    out["balanced"] = bool(final_info["balanced"])
+    out["drive_energy"] = drive_energy(history["t"], history["rotor_speed"], torque)
+    return out
 
 
 def nonsynchronous_whirl(scene: Scene, t, rotor_speed, ball_angles,
@@ -117,9 +175,3 @@ def _slips(t, rotor_speed, ball_angles, critical_speed: float, window: float | N
         return bool(np.any(ang[0] - ang.min(axis=0) > 2 * math.pi))
     lag = np.minimum(np.searchsorted(tt, tt + window), len(tt) - 1)
     return bool(np.any(ang - ang[lag] > 2 * math.pi))
-
-
-def trajectory_metrics(tr, **kwargs) -> dict[str, Any]:
-    """:func:`runup_metrics` of a :class:`~abb_gym.physics.simulate.Trajectory`."""
-    return runup_metrics(tr.scene, tr.t, tr.rotor_speed, tr.whirl_radius, tr.ball_angles,
-                         torque=tr.motor_torque, **kwargs)

@@ -1,12 +1,20 @@
-"""Evaluation outputs: a Markdown table, CSV and JSON files, and charts.
+"""Evaluation outputs: Markdown tables, CSV and JSON files, and charts.
 
-* ``summary.md`` - one row per policy: mean [95 % CI] of each metric.
-* ``episodes.csv`` - one row per policy and episode; ``evaluation.json`` - both.
-* ``timeseries.png`` - thesis-style time histories of every policy on the same scenario
-  (episode 0 of the test set).
-* ``pareto.png`` - the speed-versus-accuracy chart of control: run-up time against residual
-  vibration, one point cloud per policy family (baselines swept over their parameters,
-  evaluated policies as their means with confidence bars), with the Pareto front marked.
+* ``summary.md`` - one row per policy: mean [95 % CI] of the headline metrics (the share of
+  episodes that completed the run-up first: a residual is measured only on those); then, for
+  every policy evaluated together with its ``replay:`` (:mod:`abb_gym.evaluation.replay`),
+  its **feedback value**: the paired difference replay minus policy, with 95 % intervals.
+* ``episodes.csv`` - one row per policy and episode; ``evaluation.json`` - all of it (every
+  metric of :data:`abb_gym.evaluation.evaluate.METRICS` for every policy, its parameters, the
+  feedback values and the sweep).
+* ``timeseries.png`` - thesis-style time histories of every policy on the same machine
+  (episode 0 of the test set); the legend sits beside the axes, long policy names are
+  shortened there and given whole in the caption.
+* ``pareto.png`` - the speed-versus-accuracy chart of control: settled run-up time against
+  residual vibration; a family keeps one colour whether swept (small points) or evaluated
+  (large markers with 95 % intervals); policies that did not complete every run-up are drawn
+  hollow with their success share, and swept points that failed are left out of the Pareto
+  front; the legend sits outside the data.
 """
 from __future__ import annotations
 
@@ -20,6 +28,10 @@ import numpy as np
 
 from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
+from .replay import feedback_value
+
+HEADLINE = ("at_speed", "run_up_time", "residual_vibration", "peak_whirl", "first_at_speed",
+            "peak_speed", "time_above_band", "balanced", "return")
 
 
 def _cell(stat: dict) -> str:
@@ -30,13 +42,38 @@ def _cell(stat: dict) -> str:
     return f"{stat['mean']:.4g} [{stat['ci_low']:.3g}, {stat['ci_high']:.3g}]"
 
 
-def summary_table(results: Sequence[EvaluationResult]) -> str:
+def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEADLINE) -> str:
     rows = []
     for r in results:
         s = r.summary()
         row = {"policy": r.policy, "episodes": s["episodes"]}
-        row.update({f"{k} [{UNITS[k]}]": _cell(s[k]) for k in METRICS})
+        row.update({f"{k} [{UNITS[k]}]": _cell(s[k]) for k in keys})
         rows.append(row)
+    return markdown_table(rows)
+
+
+def base_name(policy: str) -> str:
+    """A policy's name without the tuned/default tag."""
+    return policy.split(" (")[0]
+
+
+def feedback_values(results: Sequence[EvaluationResult]) -> dict[str, dict]:
+    """Feedback value of every policy whose ``replay:`` was evaluated with it."""
+    by_name = {base_name(r.policy): r for r in results}
+    out = {}
+    for r in results:
+        name = base_name(r.policy)
+        replay = by_name.get(f"replay:{name}")
+        if replay is not None and not name.startswith("replay:"):
+            out[name] = feedback_value(r.episodes, replay.episodes)
+    return out
+
+
+def feedback_table(values: dict[str, dict]) -> str:
+    rows = [{"policy": name,
+             "residual: replay - policy [W_r/e]": _cell(v["residual_vibration"]),
+             "run-up time: replay - policy [s]": _cell(v["run_up_time"]),
+             "return: replay - policy": _cell(v["return"])} for name, v in values.items()]
     return markdown_table(rows)
 
 
@@ -49,18 +86,26 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
              "json": out / "evaluation.json"}
     first = results[0]
     head = (f"Evaluation on {first.env_id}, scene {first.scene}, preset {first.preset}, "
-            f"seed {first.seed}: {len(first.episodes)} episodes per policy, mean [95 % CI].\n\n")
-    paths["summary"].write_text(head + summary_table(results) + "\n")
+            f"seed {first.seed}: {len(first.episodes)} episodes per policy, mean [95 % CI].  "
+            f"at_speed: share of episodes that completed the run-up (an unbroken settling "
+            f"window in the operating band); residual_vibration over those.\n\n")
+    text = head + summary_table(results) + "\n"
+    feedback = feedback_values(results)
+    if feedback:
+        text += ("\nFeedback value (paired over the same episodes; positive residual and "
+                 "run-up time differences, and negative return differences, mean the policy "
+                 "beats its own open-loop replay):\n\n" + feedback_table(feedback) + "\n")
+    paths["summary"].write_text(text)
     rows = [e for r in results for e in r.episodes]
     with open(paths["episodes"], "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
-               "seed": first.seed,
+               "seed": first.seed, "metrics": {k: UNITS[k] for k in METRICS},
                "policies": [{"policy": r.policy, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
-               "sweep": sweep or []}
+               "feedback_value": feedback, "sweep": sweep or []}
     paths["json"].write_text(json.dumps(payload, indent=1, default=_json_default))
     recorded = [(r.policy, r.rollouts[min(r.rollouts)]) for r in results if r.rollouts]
     if recorded:
@@ -92,46 +137,85 @@ def pareto_front(points: np.ndarray) -> np.ndarray:
     return np.array(front, dtype=int)
 
 
+def family_of(policy: str) -> str:
+    """The colour key of a policy: its baseline family, or its own name (``replay:X`` is X's
+    family, drawn apart by its marker)."""
+    name = base_name(policy)
+    if name.startswith("replay:"):
+        name = name[len("replay:"):]
+    return name.split(":", 1)[1] if name.startswith("baseline:") else name
+
+
 def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path) -> Path:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
-    pts, labels = [], []
-    families = sorted({s["family"] for s in sweep})
+    fig, ax = plt.subplots(figsize=(10, 5.5), constrained_layout=True)
     cmap = plt.get_cmap("tab10")
-    for k, fam in enumerate(families):
+    keys = list(dict.fromkeys([s["family"] for s in sweep] +
+                              [family_of(r.policy) for r in results]))
+    colour = {k: cmap(i % 10) for i, k in enumerate(keys)}
+    pts = []
+    for fam in dict.fromkeys(s["family"] for s in sweep):
         fs = [s for s in sweep if s["family"] == fam]
-        x = [s["time_to_speed"] for s in fs]
-        y = [s["residual_vibration"] for s in fs]
-        ax.scatter(x, y, s=18, alpha=0.55, color=cmap(k % 10), label=f"{fam} (swept)")
-        pts += list(zip(x, y))
-        labels += [fam] * len(fs)
-    for j, r in enumerate(results):
+        ok = [s for s in fs if s.get("at_speed", 1.0) >= 1.0]
+        bad = [s for s in fs if s.get("at_speed", 1.0) < 1.0]
+        ax.scatter([s["run_up_time"] for s in ok], [s["residual_vibration"] for s in ok], s=16,
+                   alpha=0.5, color=colour[fam], label=f"{fam}: swept")
+        if bad:
+            ax.scatter([s["run_up_time"] for s in bad], [s["residual_vibration"] for s in bad],
+                       s=16, alpha=0.5, facecolors="none", edgecolors=colour[fam])
+        pts += [(s["run_up_time"], s["residual_vibration"]) for s in ok]
+    failed_any = False
+    never = []
+    for r in results:
         s = r.summary()
-        x, y = s["time_to_speed"], s["residual_vibration"]
+        x, y, share = s["run_up_time"], s["residual_vibration"], s["at_speed"]["mean"]
+        fam = family_of(r.policy)
+        replay = base_name(r.policy).startswith("replay:")
+        complete = share >= 1.0
+        failed_any |= not complete
+        label = _short(base_name(r.policy)) + ("" if complete else f" (at speed {share:.0%})")
+        if not np.isfinite(y["mean"]):  # no run-up completed: drawn in the failure strip
+            never.append((x["mean"], colour[fam], label))
+            continue
         ax.errorbar(x["mean"], y["mean"],
                     xerr=[[x["mean"] - x["ci_low"]], [x["ci_high"] - x["mean"]]]
                     if np.isfinite(x["ci_low"]) else None,
                     yerr=[[y["mean"] - y["ci_low"]], [y["ci_high"] - y["mean"]]]
                     if np.isfinite(y["ci_low"]) else None,
-                    fmt="D", ms=8, color=cmap((len(families) + j) % 10), mec="k",
-                    label=f"{r.policy} (mean, 95 % CI)")
-        pts.append((x["mean"], y["mean"]))
-        labels.append(r.policy)
+                    fmt="s" if replay else "D", ms=8, color=colour[fam], mec="k",
+                    mfc=colour[fam] if complete else "none", label=label)
+        if complete:
+            pts.append((x["mean"], y["mean"]))
     if pts:
         arr = np.array(pts, float)
         front = pareto_front(arr)
         if front.size:
-            ax.plot(arr[front, 0], arr[front, 1], "k--", lw=1, label="Pareto front")
-    ax.set_xlabel("time to operating speed [s]")
-    ax.set_ylabel("residual vibration at operating speed, mean W_r / e [-]")
+            ax.plot(arr[front, 0], arr[front, 1], "k--", lw=1, label="Pareto front (complete)")
+    if never:
+        lo, hi = ax.get_ylim()
+        strip = hi + 0.08 * (hi - lo)
+        ax.axhline(strip, color="0.5", lw=0.6, ls=":")
+        ax.text(ax.get_xlim()[0], strip, "  no run-up completed", fontsize=7, va="bottom",
+                color="0.3")
+        for x, c, label in never:
+            ax.plot(x, strip, "X", ms=9, color=c, mec="k", label=label)
+        ax.set_ylim(lo, strip + 0.06 * (hi - lo))
+    ax.set_xlabel("settled run-up time: entry into the operating band for good [s]")
+    ax.set_ylabel("residual vibration over the settling window, W_r / e [-]")
     title = f"Run-up time against residual vibration ({results[0].scene})" if results \
         else "Run-up time against residual vibration"
-    ax.set_title(title)
+    if failed_any or any(s.get("at_speed", 1.0) < 1.0 for s in sweep):
+        title += "\nhollow: some run-ups never completed (residual over the completed ones)"
+    ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _short(name: str, limit: int = 40) -> str:
+    return name if len(name) <= limit else name[:limit - 3] + "..."

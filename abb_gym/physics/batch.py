@@ -74,9 +74,10 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
 
     ``seg_d`` holds ``nseg`` drive rows, ``j`` is the index of the current row (as returned by
     the previous call), ``ws`` a (WS_ROWS, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
-    ``whirl`` (length 4) accumulates over the substeps (right-endpoint rule): ``whirl[0]`` +=
+    ``whirl`` (length 5) accumulates over the substeps (right-endpoint rule): ``whirl[0]`` +=
     the integral of the deflection from the rest position ``(whirl[2], whirl[3])`` (the static
-    sag under gravity, else 0), ``whirl[1]`` = max(whirl[1], largest whirl radius
+    sag under gravity, else 0), ``whirl[4]`` = max(whirl[4], that deflection), ``whirl[1]`` =
+    max(whirl[1], largest whirl radius
     sqrt(x^2 + y^2) measured from the bearing axis).
 
     Returns ``(status, j, failure time, index of the first non-finite entry, steps)``; status 0
@@ -107,7 +108,10 @@ def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
                 return integ.STATUS_NONFINITE, j, ti + h, bad, steps
             dx = s[0] - whirl[2]
             dy = s[1] - whirl[3]
-            whirl[0] += math.sqrt(dx * dx + dy * dy) * h
+            rd = math.sqrt(dx * dx + dy * dy)
+            whirl[0] += rd * h
+            if rd > whirl[4]:
+                whirl[4] = rd
             r = math.sqrt(s[0] * s[0] + s[1] * s[1])
             if r > whirl[1]:
                 whirl[1] = r
@@ -131,7 +135,7 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work,
     for e in prange(n_env):
         s = ws[e, WS_BACKUP]
         s[:] = s0[e]
-        whirl = np.zeros(4)
+        whirl = np.zeros(5)
         j = 0
         ns_e = nseg[e]
         while j + 1 < ns_e and seg_d[e, j + 1, dl.D_T0] <= t_out[0]:

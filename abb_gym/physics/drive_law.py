@@ -164,3 +164,14 @@ def motor_torques(t, w, rows):
     for k in range(t.shape[0]):
         out[k] = motor_torque(t[k], w[k], rows[_row_index(t[k], rows)], True)
     return out
+
+
+@njit(cache=True)
+def prescribed_speeds(t, tables, n_rows):
+    """Speed [rad/s] of prescribed drive table ``e`` at time ``t[e]``, for every ``e``:
+    ``tables`` (E, R, N_DRIVE) with ``n_rows[e]`` valid rows each (many profiles at once)."""
+    out = np.empty(t.shape[0])
+    for e in range(t.shape[0]):
+        rows = tables[e, :n_rows[e]]
+        out[e] = prescribed_state(t[e], rows[_row_index(t[e], rows)])[1]
+    return out

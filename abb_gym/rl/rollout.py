@@ -4,9 +4,9 @@ A thin layer over :mod:`abb_gym.evaluation.evaluate`, so that the training callb
 tests and ``abb-gym evaluate --policy ppo:PATH`` score agents with exactly the same episodes
 and metrics: episode ``k`` of a test set with seed ``S`` is the environment reset with seed
 ``S + k`` on the preset (``test`` by default); metrics per episode as in
-:func:`abb_gym.evaluation.metrics.metrics_from_arrays` (``time_to_speed`` [s],
-``residual_vibration`` = mean W_r/e over the last ``settle_time`` of the episode,
-``peak_whirl`` [W_r/e], ``balanced``, ``return``, ...).
+:mod:`abb_gym.evaluation.metrics` (``at_speed``: the run-up completed, ``run_up_time`` [s]:
+the settled entry, ``residual_vibration`` [W_r/e] over the settling window, ``peak_whirl``,
+``balanced``, ``return``, ...).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from typing import Any
 
 __all__ = ["run_episodes", "brief", "KEY_METRICS"]
 
-KEY_METRICS = ("return", "time_to_speed", "residual_vibration", "peak_whirl", "balanced")
+KEY_METRICS = ("return", "at_speed", "run_up_time", "residual_vibration", "peak_whirl", "balanced")
 
 
 def run_episodes(policy: Any, env_id: str, *, episodes: int = 64, seed: int = 0,

@@ -162,9 +162,10 @@ def _make_eval_callback_class():
                 if vn is not None:
                     vn.save(str(self.run_dir / "best_vecnormalize.pkl"))
             if self.verbose:
-                print(f"eval @ {self.num_timesteps}: return {means['return']:.3f}, residual "
-                      f"vibration {means['residual_vibration']:.3f} W_r/e, time to speed "
-                      f"{means['time_to_speed']:.2f} s, peak {means['peak_whirl']:.1f}, "
+                print(f"eval @ {self.num_timesteps}: return {means['return']:.3f}, at speed "
+                      f"{means['at_speed']:.2f}, residual vibration "
+                      f"{means['residual_vibration']:.3f} W_r/e, run-up time "
+                      f"{means['run_up_time']:.2f} s, peak {means['peak_whirl']:.1f}, "
                       f"balanced {means['balanced']:.2f}", flush=True)
 
         def _write(self) -> None:
