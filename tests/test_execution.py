@@ -3,8 +3,11 @@ stable ids, retries after a killed worker or an exception, resume after an inter
 without recomputing finished tasks, the CLI options, and the local mode of run_trials.
 (The Ray modes are in test_execution_ray.py.)"""
 import argparse
+import multiprocessing
 import os
+import pickle
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -17,7 +20,12 @@ from abb_gym.analysis import Groups, stability_map
 from abb_gym.execution import (Executor, MissingExtraError, ResultStore, TaskFailed, run_tasks,
                                seed_int, task_id, task_seed)
 from abb_gym.execution.cli import add_executor_arguments, executor_from_args
-from abb_gym.execution.testing import ToyTask, count_computed, toy_task, toy_trainable
+from abb_gym.execution.errors import (RayConnectionError, RemoteTraceback, SweepInterrupted,
+                                      portable_error)
+from abb_gym.execution.store import STALE_TMP_AGE
+from abb_gym.execution.testing import (ToyTask, count_computed, count_started,
+                                       ctrl_c_after_saves, running_keys, toy_task,
+                                       toy_trainable)
 from abb_gym.execution.tune import (choice, expand_space, grid, loguniform, randint,
                                     run_trials, uniform)
 
@@ -104,11 +112,112 @@ def test_store_is_atomic_and_ignores_unreadable_files(tmp_path):
     assert st.load(tid) == (True, {"v": 1}) and list(st.ids()) == [tid]
     assert not list((tmp_path / "s").glob(".*.tmp"))              # no temporary file left
     (tmp_path / "s" / f"{tid}.pkl").write_bytes(b"\x80\x04truncated")
-    assert st.load(tid) == (False, None)                          # recomputed, not an error
+    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tid}.pkl"):
+        assert st.load(tid) == (False, None)                      # recomputed, not an error
     with pytest.raises(ValueError, match="task id"):
         st.save("../evil", 1)
     st.clear()
     assert len(st) == 0
+
+
+def _ids(tasks, seed=7):
+    return [task_id(toy_task, t, task_seed(seed, i)) for i, t in enumerate(tasks)]
+
+
+def test_damaged_store_is_named_or_healed(tmp_path):
+    """A tampered result file is recomputed with a warning naming it (and rewritten); a
+    directory in place of a result file is a ValueError naming it, before anything runs; a
+    temporary file a killed run left behind is never read and, once stale, deleted."""
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path)) for i in range(6)]
+    ids, store = _ids(tasks), tmp_path / "store"
+    run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
+    tampered = store / f"{ids[2]}.pkl"
+    tampered.write_text("Every result in this store is wrong\n")
+    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tampered.name}"):
+        out = run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
+    assert out == _expected(6) and count_computed(tmp_path)[2] == 2
+    assert ResultStore(store).load(ids[2]) == (True, out[2])     # healed
+
+    (store / f"{ids[4]}.pkl").unlink()
+    (store / f"{ids[4]}.pkl").mkdir()
+    with pytest.raises(ValueError, match=f"{ids[4]}.pkl' is a directory"):
+        run_tasks(toy_task, tasks, workers=2, seed=7, store=store, progress=False)
+    assert count_started(tmp_path)[4] == 1                       # failed before running
+    assert ids[4] not in set(ResultStore(store).ids())
+    (store / f"{ids[4]}.pkl").rmdir()
+
+    # leftovers of a run killed mid-write: full records, but not results
+    (store / f"{ids[4]}.pkl").unlink(missing_ok=True)
+    record = pickle.dumps({"format": 1, "task_id": ids[4], "result": -1.0})
+    stale, fresh = store / f".{ids[4]}.old.tmp", store / f".{ids[4]}.new.tmp"
+    stale.write_bytes(record)
+    fresh.write_bytes(record)
+    old = time.time() - STALE_TMP_AGE - 60
+    os.utime(stale, (old, old))
+    assert ids[4] not in set(ResultStore(store).ids())
+    assert run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False) == \
+        _expected(6)
+    assert not stale.exists() and fresh.exists()        # a fresh one may be another run's
+
+
+def test_input_errors_are_not_retried_and_reach_the_caller(tmp_path):
+    """ValueError and TypeError (bad input, e.g. an unknown scene name) stop the sweep at their
+    first occurrence and reach the caller unchanged; nothing runs on after the call."""
+    cases = [(ValueError, -1, "negative dimensions are not allowed"),
+             (TypeError, "x", "cannot be interpreted as an integer")]
+    for k, (kind, n, message) in enumerate(cases):
+        for kw in (dict(workers=1), dict(workers=2, chunksize=1), dict(workers=2, chunksize=4)):
+            d = tmp_path / f"{k}-{kw['workers']}-{kw.get('chunksize')}"
+            d.mkdir()
+            tasks = [ToyTask(key=i, x=float(i), marker_dir=str(d), sleep=0.02,
+                             n=n if i == 9 else 16) for i in range(N)]
+            with pytest.raises(kind, match=message) as err:
+                run_tasks(toy_task, tasks, seed=7, store=d / "store", progress=False, **kw)
+            assert type(err.value) is kind
+            assert count_started(d)[9] == 1                   # no retry (retries=2)
+            assert running_keys(d) == set() and multiprocessing.active_children() == []
+            assert any("task 9" in note for note in err.value.__notes__)
+            if kw["workers"] > 1:
+                assert isinstance(err.value.__cause__, RemoteTraceback)
+                assert message in str(err.value.__cause__)
+            stored = set(ResultStore(d / "store").ids())
+            assert stored <= {t for i, t in enumerate(_ids(tasks)) if count_computed(d).get(i)}
+
+
+class _PickyError(ValueError):
+    def __init__(self, field, value):
+        super().__init__(f"{field} must be positive (got {value})")
+
+
+def test_an_input_error_that_does_not_unpickle_still_arrives():
+    back = pickle.loads(pickle.dumps(portable_error(_PickyError("mass", -1))))
+    assert type(back) is ValueError and str(back) == "_PickyError: mass must be positive (got -1)"
+    keeps = pickle.loads(pickle.dumps(portable_error(ValueError("x"))))
+    assert type(keeps) is ValueError and str(keeps) == "x"
+
+
+def test_ctrl_c_stops_the_sweep_says_how_to_resume_and_resumes(tmp_path):
+    for kw in (dict(workers=1), dict(workers=2, chunksize=1), dict(workers=2, chunksize=3)):
+        d = tmp_path / f"{kw['workers']}-{kw.get('chunksize')}"
+        d.mkdir()
+        tasks = [ToyTask(key=i, x=float(i), marker_dir=str(d), sleep=0.02) for i in range(N)]
+        with ctrl_c_after_saves(5):
+            with pytest.raises(KeyboardInterrupt) as err:
+                run_tasks(toy_task, tasks, seed=7, store=d / "store", progress=False, **kw)
+        assert isinstance(err.value, SweepInterrupted)
+        assert (err.value.done, err.value.total, err.value.store) == (5, N, d / "store")
+        assert str(err.value) == (f"interrupted; 5 of {N} tasks finished; rerun the same "
+                                  f"command with --resume-dir {d / 'store'} to continue")
+        assert running_keys(d) == set() and multiprocessing.active_children() == []
+        finished = set(ResultStore(d / "store").ids())
+        assert len(finished) == 5
+        before = {p.name for p in d.glob("computed-*")}
+        assert run_tasks(toy_task, tasks, seed=7, store=d / "store", progress=False,
+                         **kw) == _expected()
+        rerun = sorted(int(p.split("-")[1])
+                       for p in {p.name for p in d.glob("computed-*")} - before)
+        assert rerun == [i for i, t in enumerate(_ids(tasks)) if t not in finished]
+    assert "nothing was kept" in str(SweepInterrupted(3, 8, None))
 
 
 def test_killed_worker_and_exception_are_retried_nothing_lost_or_double(tmp_path):
@@ -254,6 +363,31 @@ def test_missing_ray_names_the_extra(monkeypatch):
         run_tasks(toy_task, [ToyTask(1)], ray=True, progress=False)
     from abb_gym.cli import main
     assert main(["stability-map", "--nx", "1", "--ny", "1", "--ray", "--no-progress"]) == 2
+
+
+def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
+    """No cluster at the address: a ValueError of one line saying how to start one, at once
+    (Ray alone would retry for 30 s to minutes), and exit status 2 from ``abb-gym``."""
+    ray = pytest.importorskip("ray")
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)   # as in a fresh process
+    with socket.socket() as s:                                  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")      # where "auto" then looks
+    for address in ("auto", f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
+        with pytest.raises(RayConnectionError) as err:
+            run_tasks(toy_task, [ToyTask(1)], ray_address=address, progress=False)
+        text = str(err.value)
+        assert isinstance(err.value, ValueError) and "\n" not in text
+        assert text.startswith(f"no Ray cluster found at {address!r}")
+        assert "ray start --head" in text and "--ray " in text and str(port) in text
+    with pytest.raises(RayConnectionError, match=f"127.0.0.1:{port}"):     # --ray, RAY_ADDRESS
+        run_tasks(toy_task, [ToyTask(1)], ray=True, progress=False)
+    from abb_gym.cli import main
+    argv = ["stability-map", "--nx", "1", "--ny", "1", "--ray-address", "auto", "--no-progress"]
+    assert main(argv) == 2
+    err_lines = capsys.readouterr().err.strip().splitlines()
+    assert len(err_lines) == 1 and "no Ray cluster found at 'auto'" in err_lines[0]
 
 
 def test_cli_stability_map_resume_dir(tmp_path):

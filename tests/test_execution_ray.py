@@ -1,8 +1,12 @@
 """Executor layer on a local Ray instance started by this module with 2 CPUs: the same sweep
 gives identical results locally and on Ray, a killed Ray worker is retried with nothing lost or
-counted twice, an interrupted sweep resumes without recomputing finished tasks, run_trials gives
+counted twice, a sweep stopped by a failed task, an input error or Ctrl-C leaves nothing running
+and resumes at once, in the same session, without recomputing finished tasks, run_trials gives
 the same trials on Ray Tune as locally, and ``abb-gym stability-map --ray`` matches
-``--workers 1``.  Skipped only when Ray is not installed (``pip install 'abb-gym[cluster]'``)."""
+``--workers 1``.  Skipped only when Ray is not installed (``pip install 'abb-gym[cluster]'``).
+
+No assertion depends on timing: the order in which Ray runs tasks, and how far a sweep got when
+it stopped, may vary; the assertions hold for every order."""
 import numpy as np
 import pytest
 
@@ -12,7 +16,11 @@ ray = pytest.importorskip(
 from abb_gym.analysis import Groups, stability_map  # noqa: E402
 from abb_gym.execution import (Executor, ResultStore, TaskFailed, run_tasks,  # noqa: E402
                                task_id, task_seed)
-from abb_gym.execution.testing import ToyTask, count_computed, toy_task, toy_trainable  # noqa
+from abb_gym.execution import ray_backend  # noqa: E402
+from abb_gym.execution.errors import RemoteTraceback, SweepInterrupted  # noqa: E402
+from abb_gym.execution.testing import (ToyTask, count_computed, count_started,  # noqa: E402
+                                       ctrl_c_after_saves, running_keys, toy_task,
+                                       toy_trainable)
 from abb_gym.execution.tune import grid, loguniform, run_trials  # noqa: E402
 
 N = 24
@@ -66,25 +74,73 @@ def test_killed_ray_worker_is_retried_nothing_lost_or_double(tmp_path):
     assert len(ResultStore(tmp_path / "s")) == N
 
 
-def test_interrupted_ray_sweep_resumes_without_recomputing(tmp_path):
-    """Task 15 fails with no retries left, which stops the sweep; the rerun (task 15 now
-    passes) computes exactly the tasks whose results were not stored.  The store is shared
-    across executors, so the rerun may even be local."""
-    tasks = _tasks(tmp_path, raise_once={15})
-    store = ResultStore(tmp_path / "s")
-    with pytest.raises(TaskFailed, match="injected failure"):
-        run_tasks(toy_task, tasks, ray=True, workers=2, chunksize=1, seed=7, retries=0,
-                  store=store.directory, progress=False)
+def _resumes_exactly(tmp_path, tasks, store, **kw):
+    """Rerun at once in the same Ray session, without retries (a worker killed by the stopped
+    sweep would fail it): the rerun computes exactly the tasks that were not stored."""
     finished = set(store.ids())
-    assert 0 < len(finished) < N
     before = {p.name for p in tmp_path.glob("computed-*")}
     out = run_tasks(toy_task, tasks, ray=True, chunksize=1, seed=7, retries=0,
-                    store=store.directory, progress=False)
+                    store=store.directory, progress=False, **kw)
     assert out == run_tasks(toy_task, _tasks(), workers=1, seed=7, progress=False)
     rerun = sorted(int(p.split("-")[1])
                    for p in {p.name for p in tmp_path.glob("computed-*")} - before)
     ids = [task_id(toy_task, t, task_seed(7, i)) for i, t in enumerate(tasks)]
     assert rerun == [i for i in range(N) if ids[i] not in finished]
+
+
+def test_interrupted_ray_sweep_resumes_without_recomputing(tmp_path):
+    """Task 15 fails with no retries left, which stops the sweep; the tasks in flight have
+    ended by the time TaskFailed arrives; the rerun (task 15 now passes) computes exactly the
+    tasks whose results were not stored."""
+    tasks = _tasks(tmp_path, raise_once={15})
+    store = ResultStore(tmp_path / "s")
+    with pytest.raises(TaskFailed, match="injected failure"):
+        run_tasks(toy_task, tasks, ray=True, workers=2, chunksize=1, seed=7, retries=0,
+                  store=store.directory, progress=False)
+    assert running_keys(tmp_path) == set()
+    assert 0 < len(store) < N
+    _resumes_exactly(tmp_path, tasks, store)
+
+
+def test_ray_input_error_is_not_retried_and_reaches_the_caller(tmp_path):
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path), n=-1 if i == 9 else 16)
+             for i in range(N)]
+    with pytest.raises(ValueError, match="negative dimensions are not allowed") as err:
+        run_tasks(toy_task, tasks, ray=True, workers=2, chunksize=2, seed=7,
+                  store=tmp_path / "s", progress=False)
+    assert type(err.value) is ValueError and count_started(tmp_path)[9] == 1
+    assert isinstance(err.value.__cause__, RemoteTraceback)
+    assert running_keys(tmp_path) == set()
+
+
+def test_ctrl_c_stops_a_ray_sweep_which_resumes_at_once(tmp_path):
+    """The chunks in flight at Ctrl-C finish (their results are stored) or are cancelled
+    before SweepInterrupted arrives; the rerun, at once, computes exactly the rest."""
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path), sleep=0.05) for i in range(N)]
+    store = ResultStore(tmp_path / "s")
+    with ctrl_c_after_saves(5):
+        with pytest.raises(SweepInterrupted) as err:
+            run_tasks(toy_task, tasks, ray=True, chunksize=1, seed=7, store=store.directory,
+                      progress=False)
+    assert running_keys(tmp_path) == set()
+    assert 5 <= err.value.done == len(store) < N and err.value.total == N
+    _resumes_exactly(tmp_path, tasks, store)
+
+
+def test_a_task_deaf_to_cancellation_is_killed_and_the_next_sweep_unharmed(tmp_path,
+                                                                          monkeypatch):
+    """Task 1 sleeps in one long call, where the KeyboardInterrupt of a cancellation cannot
+    reach it, so its worker is killed after the grace period; the sweep started right after
+    must not pay for that death (it runs without retries)."""
+    monkeypatch.setattr(ray_backend, "CANCEL_GRACE", 0.3)
+    monkeypatch.setattr(ray_backend, "_our_kills", [])
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path), raise_once=i == 0,
+                     sleep=2.0 if i == 1 else 0.0) for i in range(N)]
+    store = ResultStore(tmp_path / "s")
+    with pytest.raises(TaskFailed, match="injected failure"):
+        run_tasks(toy_task, tasks, ray=True, workers=2, chunksize=1, seed=7, retries=0,
+                  store=store.directory, progress=False)
+    _resumes_exactly(tmp_path, tasks, store)
 
 
 def test_run_trials_on_ray_tune_matches_local_and_resumes(tmp_path):

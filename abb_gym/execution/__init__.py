@@ -82,12 +82,33 @@ Failures, retries and resume
   id and last traceback.  Locally the failure is charged to exactly the task that was running
   (the rest of its chunk is requeued untouched); on Ray, exceptions are retried per task inside
   the Ray task and worker deaths by Ray resubmitting the chunk.
+* Bad input is never retried: a task that raises ``ValueError`` or ``TypeError`` (this includes
+  the project's ``SceneError`` and ``PresetError``, e.g. an unknown scene name) stops the sweep
+  at once, and that exception, with its own type and message, reaches the caller, so
+  ``abb-gym`` prints it as one line (exit status 2).  A note names the task; from a worker
+  process, the worker's traceback is its ``__cause__``.  An exception that cannot travel
+  between processes arrives as a plain ValueError / TypeError with the same message.
+* Ctrl-C raises :class:`~.errors.SweepInterrupted`, a KeyboardInterrupt whose one-line message
+  says how many tasks finished and how to resume (``done``, ``total``, ``store``).
+* However a sweep stops (a failed task, bad input, Ctrl-C), the tasks in flight have ended
+  before the exception reaches the caller: nothing computes on behind its back, and a sweep
+  started next (e.g. the resumed one, in the same Ray session) starts clean.  Local workers are
+  terminated at once.  On Ray, the running chunks get ``ray_backend.CANCEL_GRACE`` seconds
+  (10) to finish, and their results are stored; then they are cancelled without killing their
+  workers, and only those that ignore that for as long again (stuck in compiled code) have
+  their workers killed.  A second Ctrl-C kills at once.
 * ``store=DIR`` (``--resume-dir``) keeps one small file per finished task (:class:`ResultStore`,
   written atomically by the driver before the task counts as done).  A rerun with the same
   ``DIR`` loads finished tasks instead of running them; the progress bar starts at that count.
   A sweep interrupted at any instant (Ctrl-C, killed driver, failed task) loses at most the
   tasks that were running.  Delete the directory after changing a task function's code.
+  A damaged result file is recomputed with a warning naming it; a directory in the place of a
+  result file is a ValueError naming it; leftover temporary files are never read (see
+  :mod:`.store`).
 * Each task's result enters the output exactly once, whatever retries happened.
+* ``ray_address=`` with no cluster answering there raises :class:`~.errors.RayConnectionError`
+  (a ValueError: one line in ``abb-gym``) within seconds, saying how to start one.
+* Under Ray Tune (:mod:`.tune`), retries follow Tune's ``FailureConfig`` for every exception.
 
 Hyperparameter search and multi-seed training
 ---------------------------------------------
@@ -107,9 +128,10 @@ Modules: :mod:`.core` (Executor, run_tasks), :mod:`.local` (serial and process p
 :mod:`.testing` (a toy task with fault injection, to check an executor or a cluster).
 """
 from .core import Executor, default_workers, run_tasks
-from .errors import MissingExtraError, TaskFailed
+from .errors import MissingExtraError, RayConnectionError, SweepInterrupted, TaskFailed
 from .ids import seed_int, task_id, task_seed, task_seeds
 from .store import ResultStore
 
 __all__ = ["Executor", "run_tasks", "default_workers", "TaskFailed", "MissingExtraError",
-           "ResultStore", "task_id", "task_seed", "task_seeds", "seed_int"]
+           "RayConnectionError", "SweepInterrupted", "ResultStore", "task_id", "task_seed",
+           "task_seeds", "seed_int"]

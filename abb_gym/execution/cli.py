@@ -21,7 +21,8 @@ Options added (one argument group, "execution"):
 ``--ray-address ADDR`` run on an existing Ray cluster (``auto``, ``HOST:6379``,
                        ``ray://HOST:10001``); implies ``--ray``
 ``--resume-dir DIR``   keep finished results in DIR; rerunning with the same DIR resumes
-``--retries N``        reruns of a failed task before the command fails (default 2)
+``--retries N``        reruns of a failed task before the command fails (default 2); a task
+                       raising ValueError or TypeError (bad input) is never rerun
 """
 from __future__ import annotations
 
@@ -66,7 +67,7 @@ def add_executor_arguments(parser: argparse.ArgumentParser, *, resume: bool = Tr
                             "DIR skips finished tasks")
     g.add_argument("--retries", type=_int_at_least(0), default=default_retries, metavar="N",
                    help=f"reruns of a task whose worker died or raised (default "
-                        f"{default_retries})")
+                        f"{default_retries}); bad input (ValueError) is never rerun")
     return g
 
 

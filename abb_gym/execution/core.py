@@ -10,7 +10,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from .errors import TaskFailed
+from .errors import SweepInterrupted, TaskFailed
 from .ids import function_name, task_id, task_seed
 from .store import ResultStore
 
@@ -55,7 +55,8 @@ class Executor:
         the same directory loads them instead of recomputing.  None keeps nothing on disk.
     retries : int
         How many times a failed task (exception, or its worker process died) runs again
-        before :class:`~abb_gym.execution.errors.TaskFailed` is raised; default 2.
+        before :class:`~abb_gym.execution.errors.TaskFailed` is raised; default 2.  A
+        ValueError or TypeError (bad input) is never retried: it reaches the caller at once.
     progress : bool
         Show a tqdm progress bar (finished / total tasks, resumed ones included).
     chunksize : int or None
@@ -148,8 +149,14 @@ class Executor:
         id; lambdas and closures run too, shipped by cloudpickle, but cannot use a store);
         tasks and results must be picklable.  Tasks whose
         id is already in the store are not run; tasks with the same id (same spec, same seed)
-        run once and share the result.  Raises :class:`~abb_gym.execution.errors.TaskFailed`
-        when a task fails ``retries + 1`` times; finished results are stored by then.
+        run once and share the result.
+
+        Raises :class:`~abb_gym.execution.errors.TaskFailed` when a task fails ``retries + 1``
+        times; re-raises a task's ValueError or TypeError (bad input) at its first occurrence,
+        unchanged, without retrying it; raises
+        :class:`~abb_gym.execution.errors.SweepInterrupted` (a KeyboardInterrupt) on Ctrl-C.
+        In every case the tasks in flight have been cancelled and have ended, and the finished
+        results are stored, before the exception is raised.
         """
         tasks = list(tasks)
         n = len(tasks)
@@ -201,12 +208,20 @@ class Executor:
                 results[j], done[j] = value, True
             bar.update(len(groups[tid]))
 
-        def on_fail(index: int, attempts: int, detail: str) -> None:
-            raise TaskFailed(index, ids[index], attempts, detail)
+        def on_fail(index: int, attempts: int, detail: str,
+                    error: BaseException | None = None) -> None:
+            if error is None:
+                raise TaskFailed(index, ids[index], attempts, detail)
+            error.add_note(f"(raised by task {index}, id {ids[index]}; a {type(error).__name__} "
+                           f"is taken as bad input and not retried)")
+            raise error
 
         try:
             if jobs:
                 self._dispatch(fn, jobs, on_result, on_fail)
+        except KeyboardInterrupt as exc:
+            raise SweepInterrupted(sum(done), n,
+                                   store.directory if store is not None else None) from exc
         finally:
             bar.close()
         missing = [i for i, d in enumerate(done) if not d]

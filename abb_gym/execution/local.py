@@ -16,9 +16,14 @@ function travels as a cloudpickle (when installed: it ships with gymnasium), so 
 defined in a script's ``__main__`` work too, as they do on Ray.
 
 Protocol (parent -> worker): a list of jobs ``(index, task, seed)`` or ``None`` to stop.
-Worker -> parent, per job in order: ``("ok", index, result)`` or ``("err", index, text)``.
-Results are sent one by one, so a worker that dies in the middle of a chunk loses nothing it
-had finished; a worker is idle again once every job of its chunk is answered.
+Worker -> parent, per job in order: ``("ok", index, result)``, ``("err", index, text)`` or,
+for an input error (:data:`~.errors.INPUT_ERRORS`, never retried), ``("bad", index, text,
+exception)``.  Results are sent one by one, so a worker that dies in the middle of a chunk
+loses nothing it had finished; a worker is idle again once every job of its chunk is answered.
+
+However the sweep stops (a failed task, Ctrl-C, an error in the driver), every worker is
+stopped and joined before the exception leaves :func:`run_processes`: busy workers are
+terminated, so nothing keeps computing after the call returns.
 """
 from __future__ import annotations
 
@@ -30,7 +35,7 @@ import traceback
 from multiprocessing.connection import wait
 from typing import Any, Callable, Iterable
 
-from .errors import call_task
+from .errors import INPUT_ERRORS, RemoteTraceback, call_task, portable_error
 
 __all__ = ["run_serial", "run_processes"]
 
@@ -38,29 +43,32 @@ Job = tuple  # (index, task, seed or None)
 
 
 class _Attempts:
-    """Failures per task; raises through ``fail`` once a task has used all its retries."""
+    """Failures per task; raises through ``on_fail`` once a task may not run again."""
 
-    def __init__(self, retries: int, on_fail: Callable[[int, int, str], None]) -> None:
+    def __init__(self, retries: int, on_fail: Callable[..., None]) -> None:
         self.retries, self.on_fail = retries, on_fail
         self.count: dict[int, int] = collections.defaultdict(int)
 
-    def failed(self, index: int, detail: str) -> bool:
-        """Record one failure; True if the task may run again."""
+    def failed(self, index: int, detail: str, error: BaseException | None = None) -> None:
+        """Record one failure; raises (through ``on_fail``) when the retries are used up or
+        ``error`` is an input error, which a rerun would only repeat."""
         self.count[index] += 1
-        if self.count[index] > self.retries:
-            self.on_fail(index, self.count[index], detail)  # raises
-        return True
+        if error is not None or self.count[index] > self.retries:
+            self.on_fail(index, self.count[index], detail, error)
 
 
 def run_serial(fn: Callable, jobs: Iterable[Job], *, retries: int,
                on_result: Callable[[int, Any], None],
-               on_fail: Callable[[int, int, str], None]) -> None:
-    """Run every job in this process, retrying exceptions (a hard crash ends the process)."""
+               on_fail: Callable[..., None]) -> None:
+    """Run every job in this process, retrying exceptions (a hard crash ends the process)
+    except input errors, which ``on_fail`` raises at once."""
     attempts = _Attempts(retries, on_fail)
     for index, task, seed in jobs:
         while True:
             try:
                 result = call_task(fn, task, seed)
+            except INPUT_ERRORS as exc:
+                attempts.failed(index, traceback.format_exc(), exc)
             except Exception:
                 attempts.failed(index, traceback.format_exc())
                 continue
@@ -105,6 +113,8 @@ def _worker_main(conn, fn_bytes: bytes) -> None:
         for index, task, seed in chunk:
             try:
                 msg = ("ok", index, call_task(fn, task, seed))
+            except INPUT_ERRORS as exc:
+                msg = ("bad", index, traceback.format_exc(), portable_error(exc))
             except Exception:
                 msg = ("err", index, traceback.format_exc())
             try:
@@ -145,7 +155,7 @@ class _Worker:
 
 def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: int,
                   chunksize: int, on_result: Callable[[int, Any], None],
-                  on_fail: Callable[[int, int, str], None],
+                  on_fail: Callable[..., None],
                   context: str | None = None) -> None:
     """Run jobs on ``workers`` local processes, ``chunksize`` jobs per dispatch.
 
@@ -153,8 +163,9 @@ def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: i
     see the module docstring).
 
     ``on_result(index, result)`` is called in this process once per job (in completion order);
-    ``on_fail(index, attempts, detail)`` must raise.  A job whose worker died or raised is
-    requeued at the front until it has failed ``retries + 1`` times.
+    ``on_fail(index, attempts, detail, error)`` must raise (``error``: the exception of an
+    input error, else None).  A job whose worker died or raised is requeued at the front until
+    it has failed ``retries + 1`` times; an input error stops the sweep at once.
     """
     if context is None and "forkserver" in multiprocessing.get_all_start_methods():
         context = "forkserver"
@@ -197,6 +208,10 @@ def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: i
                             job = w.running.pop(0)
                             if msg[0] == "ok":
                                 on_result(job[0], msg[2])
+                            elif msg[0] == "bad":
+                                error = msg[3]
+                                error.__cause__ = RemoteTraceback(msg[2])
+                                attempts.failed(job[0], msg[2], error)
                             else:
                                 attempts.failed(job[0], msg[2])
                                 queue.appendleft(job)

@@ -2,7 +2,11 @@
 
 :func:`toy_task` is seeded, cheap and deterministic; through marker files in
 ``ToyTask.marker_dir`` it can kill its own worker process or raise once, and it leaves one
-``computed-<key>-*`` file per computation, so a test can count how often each task ran.
+``started-<key>-*`` file per run, locked (``flock``) while the run lasts, and one
+``computed-<key>-*`` file per computation, so a test can count how often each task ran
+(:func:`count_started`, :func:`count_computed`) and which tasks are running right now
+(:func:`running_keys`): none should be once a sweep has returned or raised.  Input errors come
+naturally: ``n=-1`` raises ValueError, ``n="x"`` TypeError, on every run.
 
 Check a cluster from any node (Ray workers must be able to import ``abb_gym``)::
 
@@ -14,6 +18,7 @@ Check a cluster from any node (Ray workers must be able to import ``abb_gym``)::
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import time
@@ -23,7 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ToyTask", "toy_task", "toy_trainable", "count_computed"]
+try:
+    import fcntl
+except ImportError:  # not POSIX: runs are counted but running_keys() sees none
+    fcntl = None
+
+__all__ = ["ToyTask", "toy_task", "toy_trainable", "count_computed", "count_started",
+           "running_keys", "ctrl_c_after_saves"]
 
 
 @dataclass(frozen=True)
@@ -58,29 +69,88 @@ def _first_time(marker_dir: str, name: str) -> bool:
     return True
 
 
+@contextlib.contextmanager
+def _running(marker_dir: str | None, key: int):
+    """Leaves a ``started-<key>-*`` file, locked until the run ends (or its process dies)."""
+    if marker_dir is None:
+        yield
+        return
+    path = Path(marker_dir) / f"started-{key}-{os.getpid()}-{uuid.uuid4().hex}"
+    with open(path, "w") as fh:
+        if fcntl is not None:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
+
+
 def toy_task(task: ToyTask, seed: np.random.SeedSequence | None = None) -> float:
     """``x + mean(n standard normals)`` drawn from ``seed`` (default: ``task.key``)."""
-    if task.sleep > 0:
-        time.sleep(task.sleep)
-    if task.marker_dir is not None:
-        if task.crash_once and _first_time(task.marker_dir, f"crashed-{task.key}"):
-            os.kill(os.getpid(), signal.SIGKILL)  # as if the OOM killer or a node loss hit it
-        if task.raise_once and _first_time(task.marker_dir, f"raised-{task.key}"):
-            raise RuntimeError(f"injected failure of toy task {task.key}")
-    rng = np.random.default_rng(seed if seed is not None else task.key)
-    value = float(task.x + rng.standard_normal(task.n).mean())
-    if task.marker_dir is not None:
-        (Path(task.marker_dir) / f"computed-{task.key}-{os.getpid()}-{uuid.uuid4().hex}").touch()
-    return value
+    with _running(task.marker_dir, task.key):
+        if task.sleep > 0:
+            time.sleep(task.sleep)
+        if task.marker_dir is not None:
+            if task.crash_once and _first_time(task.marker_dir, f"crashed-{task.key}"):
+                os.kill(os.getpid(), signal.SIGKILL)  # as if the OOM killer or a node loss hit
+            if task.raise_once and _first_time(task.marker_dir, f"raised-{task.key}"):
+                raise RuntimeError(f"injected failure of toy task {task.key}")
+        rng = np.random.default_rng(seed if seed is not None else task.key)
+        value = float(task.x + rng.standard_normal(task.n).mean())
+        if task.marker_dir is not None:
+            (Path(task.marker_dir) / f"computed-{task.key}-{os.getpid()}-"
+                                     f"{uuid.uuid4().hex}").touch()
+        return value
 
 
-def count_computed(marker_dir: str | os.PathLike) -> dict[int, int]:
-    """Computations per task key found in ``marker_dir``."""
+def _count(marker_dir: str | os.PathLike, prefix: str) -> dict[int, int]:
     counts: dict[int, int] = {}
-    for p in Path(marker_dir).glob("computed-*"):
+    for p in Path(marker_dir).glob(f"{prefix}-*"):
         key = int(p.name.split("-")[1])
         counts[key] = counts.get(key, 0) + 1
     return counts
+
+
+def count_computed(marker_dir: str | os.PathLike) -> dict[int, int]:
+    """Computations (runs that returned a result) per task key found in ``marker_dir``."""
+    return _count(marker_dir, "computed")
+
+
+def count_started(marker_dir: str | os.PathLike) -> dict[int, int]:
+    """Runs per task key found in ``marker_dir``, whatever their outcome."""
+    return _count(marker_dir, "started")
+
+
+def running_keys(marker_dir: str | os.PathLike) -> set[int]:
+    """Keys of the toy tasks running right now (their ``started-*`` file is still locked)."""
+    running: set[int] = set()
+    if fcntl is None:
+        return running
+    for p in Path(marker_dir).glob("started-*"):
+        with open(p) as fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                running.add(int(p.name.split("-")[1]))
+    return running
+
+
+@contextlib.contextmanager
+def ctrl_c_after_saves(n_saved: int):
+    """Inside the block, the driver gets one KeyboardInterrupt, as from Ctrl-C, when it is
+    about to store a result while ``n_saved`` are stored already: Ctrl-C at a known instant."""
+    from .store import ResultStore
+
+    save, pressed = ResultStore.save, []
+
+    def interrupted_save(self, tid, result):
+        if not pressed and len(self) >= n_saved:
+            pressed.append(True)
+            raise KeyboardInterrupt
+        return save(self, tid, result)
+
+    ResultStore.save = interrupted_save
+    try:
+        yield
+    finally:
+        ResultStore.save = save
 
 
 def toy_trainable(config: dict) -> dict:
