@@ -10,7 +10,7 @@ PIP := $(VENV)/bin/pip
 # torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
 PIP_INSTALL := $(PIP) install -q -c constraints.txt
 
-.PHONY: setup demo test test-slow bench clean
+.PHONY: setup demo test test-slow bench kernels wheel clean
 
 setup: $(VENV)/.installed
 
@@ -32,6 +32,14 @@ test-slow: setup
 bench: setup
 	$(PY) -m abb_gym.cli bench speed
 
+# compile the kernels ahead of time (abb_gym.kernels), then build a wheel that ships them
+kernels: setup
+	$(PY) -m abb_gym.cli build-kernels
+
+wheel: kernels
+	$(PY) -m pip wheel . --no-deps -q -w dist
+
 clean:
 	rm -rf $(VENV) out
 	find abb_gym -name '*.nbi' -delete -o -name '*.nbc' -delete
+	rm -f abb_gym/_kernels/numba-sources.sha1

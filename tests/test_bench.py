@@ -18,3 +18,14 @@ def test_work_precision_rows_and_chart(tmp_path):
         assert errs[-1] < errs[0] / 100
     png = plot_work_precision(rows, tmp_path / "wp.png")
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_speed_benchmark_parts_measure_what_they_name():
+    from abb_gym.benchmarks import env_speed
+    vec = env_speed.vector_rate(64, 3, kernel="generic")
+    assert vec["kernel"] == "generic" and vec["rate"] > 0 and vec["reset_us"] > 0
+    cp_vec, cp_single = env_speed.cartpole_rates(16, 3)
+    assert cp_vec > 0 and cp_single > 0
+    cold = env_speed.cold_start(with_empty_cache=False)
+    assert set(cold) == {"python", "import", "help", "first_step_cached"}
+    assert cold["import"] >= cold["python"] > 0

@@ -11,8 +11,11 @@ from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics.simulate import default_step, initial_state
 
 
-@pytest.mark.parametrize("scene_name", ["yoshida_odd", "lu_hung_odd3", "spannan_discoidal"])
-def test_run_batch_equals_rk4_run(scene_name):
+@pytest.mark.parametrize("scene_name, kernel", [
+    ("yoshida_odd", "generic"), ("lu_hung_odd3", "generic"), ("spannan_discoidal", "generic"),
+    # one vectorised case: each specialisation compiles for about a minute
+    ("yoshida_odd", "vectorised")])
+def test_run_batch_equals_rk4_run(scene_name, kernel):
     base = abb_gym.load_scene(scene_name)
     w = base.drive_operating_speed
     a = base.drive_max_acceleration
@@ -25,6 +28,8 @@ def test_run_batch_equals_rk4_run(scene_name):
          abb_gym.MotorDrive.constant_torque(0.5 * base.drive_torque_limit)),
         (base, abb_gym.MotorDrive.limited_power(1e-3, abb_gym.SpeedProfile.ramp(a / 2, w))),
     ]
+    if kernel == "vectorised":
+        cases = cases[:2]  # the prescribed-rotor group only: one specialisation to compile
     t_end = 1.2 * crit / (a / 2)
     t_out = np.linspace(0.0, t_end, 61)
     h = default_step(base, w)
@@ -48,27 +53,44 @@ def test_run_batch_equals_rk4_run(scene_name):
         refs.append((out, status))
     out = np.empty((n, len(t_out), ns))
     status = np.zeros((n, 4))
-    ws, work = batch.make_workspace(n, nb)
-    batch.run_batch(s0, t_out, seg_d, nseg, p, b, h, out, status, ws, work)
+    batch.run_batch(s0, t_out, seg_d, nseg, p, b, h, out, status, kernel=kernel)
     for i, (ref, st) in enumerate(refs):
         assert status[i, 0] == st[0] == 0
         assert status[i, 3] == st[3]
         assert np.array_equal(out[i], ref), f"case {i} differs"
 
 
-def test_advance_reports_nonfinite_and_whirl():
+def test_advance_block_reports_nonfinite_and_whirl():
     sc = abb_gym.load_scene("yoshida_odd")
     drive = abb_gym.SpeedProfile.ramp(40.0, 240.0)
-    s = initial_state(sc, drive)
     _, rows = drive.segment_table(10.0)
     p, b = mdl.pack_parameters(sc)
-    ws, work = batch.make_workspace(1, 2)
-    whirl = np.zeros(5)  # integral, max, rest position (0, 0), max from rest
-    st, j, t_fail, bad, steps = batch.advance(s, 0.0, 2.6, rows, len(rows), 0, p, b, 1e-3,
-                                              ws[0], work[0], whirl, integ.METHOD_RK4)
-    assert st == 0 and steps == 2600 and whirl[1] > 0 and 0 < whirl[0] < 2.6 * whirl[1]
-    assert whirl[4] == whirl[1]  # no gravity: the rest position is the bearing axis
-    s[4] = np.nan
-    st, *_ = batch.advance(s, 2.6, 2.7, rows, len(rows), j, p, b, 1e-3, ws[0], work[0], whirl,
-                           integ.METHOD_RK4)
-    assert st == 1
+    blocks = batch.Blocks(2, 2, lanes=2)
+    s, pb, bb, d, k, tmp, lam, coef, work, f, g, act = (a[0] for a in blocks.arrays())
+    for lane in range(2):
+        s[:, lane] = initial_state(sc, drive)
+        pb[:, lane] = p
+        bb[:, :, lane] = b
+    seg_d = np.stack([rows, rows])
+    g[batch.G_ON] = 1
+    g[batch.G_ROW] = [0, 1]
+    g[batch.G_NSEG] = len(rows)
+    f[batch.F_T1] = [2.6, 1.3]  # lanes with their own intervals and steps
+    f[batch.F_HMAX] = [1e-3, 0.5e-3]
+    spec = mdl.spec_of(p, rows)
+    batch.advance_block(s, pb, bb, d, k, tmp, lam, coef, work, f, g, act, seg_d,
+                        integ.METHOD_RK4, 2, spec)
+    assert list(g[batch.G_STATUS]) == [0, 0] and list(g[batch.G_STEPS]) == [2600, 2600]
+    assert f[batch.W_MAX, 0] > 0 and 0 < f[batch.W_INT, 0] < 2.6 * f[batch.W_MAX, 0]
+    assert f[batch.W_DMAX, 0] == f[batch.W_MAX, 0]  # no gravity: the rest position is the axis
+    ref = np.empty((2, len(s)))
+    integ.run(integ.METHOD_RK4, initial_state(sc, drive), np.array([0.0, 1.3]), rows[:, 0].copy(),
+              rows, p, b, 0.5e-3, 0.0, np.zeros(1), ref, 2, spec)
+    assert np.array_equal(s[:, 1], ref[1])  # the lane that stopped early kept its state
+    s[4, 0] = np.nan
+    f[batch.F_T0] = f[batch.F_T1]
+    f[batch.F_T1] += 0.1
+    batch.advance_block(s, pb, bb, d, k, tmp, lam, coef, work, f, g, act, seg_d,
+                        integ.METHOD_RK4, 2, spec)
+    assert list(g[batch.G_STATUS]) == [integ.STATUS_NONFINITE, 0]
+    assert g[batch.G_BAD, 0] >= 0 and abs(f[batch.F_TFAIL, 0] - 2.6 - 1e-3) < 1e-12

@@ -15,13 +15,14 @@ SHORT = {"episode_length": 0.3, "settle_time": 0.05}
 
 
 def make_vec(env_id, n, **kw):
+    kw.setdefault("info_level", "full")  # these tests read the per-step keys
     return gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **kw)
 
 
 def compare_with_singles(env_id, n, steps, seed, actions, **kw):
     """Step the vector env and n single envs side by side (NEXT_STEP autoreset)."""
     vec = make_vec(env_id, n, **kw)
-    singles = [gym.make(env_id, **kw) for _ in range(n)]
+    singles = [gym.make(env_id, **{"info_level": "full", **kw}) for _ in range(n)]
     obs, info = vec.reset(seed=seed)
     done = np.zeros(n, dtype=bool)
     for i, env in enumerate(singles):
@@ -72,6 +73,54 @@ def test_dwell_vector_matches_single_envs():
     resets, ends = compare_with_singles("abb_gym/DwellProfile-v0", n, 4, 7, actions,
                                         scene="lu_hung_odd3")
     assert ends == 2 * n and resets == 2 * n  # episode, autoreset, episode, autoreset
+
+
+@pytest.mark.parametrize("env_id", ["abb_gym/RunUpSpeed-v0", "abb_gym/DwellProfile-v0"])
+def test_vectorised_kernel_equals_the_general_one(env_id):
+    """The kernel specialised on the scene (vector instructions across the lanes of a block)
+    and the general kernel give the same steps bit for bit, over resets and episode ends;
+    with more sub-environments than a block has lanes, rows sorted into blocks by step size,
+    and episodes of different step sizes (randomised drag) in one block."""
+    n = 40
+    kw = dict(info_level="full")
+    vecs = [make_vec(env_id, n, kernel=k, **kw) for k in ("vectorised", "generic")]
+    assert [v.unwrapped.kernel for v in vecs] == ["vectorised", "generic"]
+    assert vecs[0].unwrapped._bufs.blocks.lanes == 16
+    rng = np.random.default_rng(2)
+    outs = [v.reset(seed=5) for v in vecs]
+    assert np.array_equal(outs[0][0], outs[1][0])
+    steps = np.unique(vecs[0].unwrapped._table.integration_step)
+    assert steps.size > 1 or env_id.endswith("Profile-v0")
+    for _ in range(3 if env_id.endswith("Profile-v0") else 40):
+        a = rng.uniform(-0.3, 1.0, size=(n,) + vecs[0].single_action_space.shape)
+        outs = [v.step(a.astype(np.float32)) for v in vecs]
+        for x, y in zip(outs[0][:4], outs[1][:4]):
+            assert np.array_equal(x, y)
+        assert np.array_equal(vecs[0].unwrapped.states, vecs[1].unwrapped.states)
+
+
+def test_lean_info_holds_the_reward_terms_and_the_final_metrics():
+    vec = gym.make_vec("abb_gym/RunUpSpeed-v0", num_envs=3,
+                       vectorization_mode="vector_entry_point", **SHORT)
+    single = gym.make("abb_gym/RunUpSpeed-v0", **SHORT)
+    obs, info = vec.reset(seed=1)
+    assert "imbalance" in info and "time" in info  # reset: everything
+    single.reset(seed=1)
+    a = np.full((3, 1), 0.7, np.float32)
+    while True:
+        obs, rew, term, trunc, info = vec.step(a)
+        o, r, te, tr, inf = single.step(a[0])
+        if not (term | trunc).any():
+            assert set(info) == {"reward_terms", "_reward_terms"}
+            assert set(inf) == {"reward_terms"}
+        else:
+            break
+    done = term | trunc
+    assert info["_time"].tolist() == done.tolist() and info["_reward_terms"].all()
+    assert te or tr
+    assert info["run_up_time"][0] == inf["run_up_time"] and "residual_vibration" in inf
+    with pytest.raises(ValueError, match="info_level must be one of"):
+        gym.make("abb_gym/RunUpSpeed-v0", info_level="verbose")
 
 
 def test_make_vec_returns_native_vector_env():

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from abb_gym import simulate
-from abb_gym.baselines import profiles, tuner
+from abb_gym.baselines import families, profiles, tuner
 from abb_gym.cli import main
 from abb_gym.baselines.baseline_policy import make_baseline
 from abb_gym.envs.actions import dwell_action, dwell_profile
@@ -20,7 +20,7 @@ SPEED = "abb_gym/RunUpSpeed-v0"
 
 def rollout(env_id, family, n=2, **params):
     env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point",
-                       scene="yoshida_odd", preset="nominal")
+                       scene="yoshida_odd", preset="nominal", info_level="full")
     obs, info = env.reset(seed=3, options={"ball_angles": np.tile([0.4, -0.7], (n, 1))})
     setup = env.unwrapped.setup
     pol = make_baseline(family, setup.scene, setup.operating_speed, params=params or None,
@@ -117,7 +117,7 @@ def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
     for fam in ("speed_dwell", "knots"):
         entry = r["families"][fam]
         assert entry["mean_return"] >= entry["default_mean_return"]
-        profiles.build_family(fam, **entry["params"])  # the declared fields validate it
+        families.build_family(fam, **entry["params"])  # the declared fields validate it
     rows = tuner.sweep("yoshida_odd", families=("ramp",), n=3, episodes=2)
     assert len(rows) == 3 and all(np.isfinite(r["run_up_time"]) for r in rows)
     res = [evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=3, seed=0)]

@@ -290,43 +290,63 @@ def test_energy_conserved_with_virtual_mass_gravity_and_elastic_contact():
     assert max(touch) > 100 * np.ptp(energy)
 
 
-def _without_extended_effects(scene):
-    """The scene with every extended effect switched off (the plain kernel's domain)."""
-    return scene.replace(gravity_acceleration=0.0, contact_stiffness=0.0,
-                         fluid_drag_law="linear", fluid_virtual_mass=0.0,
-                         friction_kinetic=0.0, friction_static=0.0)
-
-
-@pytest.mark.parametrize("name", abb_gym.list_scenes())
-@pytest.mark.parametrize("motor", [False, True])
-def test_extended_specialisation_equals_the_plain_one_on_every_shipped_scene(name, motor):
-    """The one accelerations body compiled twice: with every extended effect off, forcing the
-    extended specialisation (P_EXT = 1) must give the plain one's trajectory bit for bit, for
-    a prescribed and a motor drive (the torque-speed envelope is the extended path too)."""
-    from abb_gym.physics import integrators as integ
-    scene = _without_extended_effects(load_scene(name))
-    assert not scene.effects & mdl.EXTENDED_EFFECTS
+def _run_case(name, motor):
+    scene = load_scene(name)
     drive = (MotorDrive.limited_power(0.05, scene.drive_operating_speed) if motor
              else SpeedProfile.dwell(0.5 * scene.drive_max_acceleration, scene.critical_speed,
                                      0.3, 0.0, scene.drive_operating_speed))
     p, b = mdl.pack_parameters(scene)
-    s0 = initial_state(scene, drive,
-                                                 np.linspace(0.3, 2.0, scene.ball_count))
-    t_out = np.linspace(0.0, 2.0, 201)
-    seg_t, seg_d = drive.segment_table(2.0, scene)
+    s0 = initial_state(scene, drive, np.linspace(0.3, 2.0, scene.ball_count))
+    t_out = np.linspace(0.0, 1.0, 101)
+    seg_t, seg_d = drive.segment_table(1.0, scene)
     h = default_step(scene, scene.drive_operating_speed)
-    runs = []
-    for ext in (0.0, 1.0):
-        p[mdl.P_EXT] = ext
+    return scene, p, b, s0, t_out, seg_t, seg_d, h
+
+
+ALL_BITS = mdl.SPEC_EXT | mdl.SPEC_ECC | mdl.SPEC_ROLL
+
+
+@pytest.mark.parametrize("name", abb_gym.list_scenes())
+@pytest.mark.parametrize("motor", [False, True])
+def test_terms_of_effects_a_scene_lacks_are_exactly_zero(name, motor):
+    """The kernel is compiled per effect set (``SPEC_*``), and a batch of scenes runs the union
+    of their sets: every term of an effect a scene does not have must then add exactly zero.
+    Forcing every effect bit on (and the motor envelope) must leave each shipped scene's
+    trajectory and drag rates unchanged bit for bit."""
+    from abb_gym.physics import integrators as integ
+    scene, p, b, s0, t_out, seg_t, seg_d, h = _run_case(name, motor)
+    spec = mdl.spec_of(p, seg_d)
+    every = spec | ALL_BITS | (mdl.SPEC_ENVELOPE if motor else 0)
+    runs, lams = [], []
+    for bits in (spec, every):
         out = np.empty((t_out.size, s0.size))
-        status = integ.rk4_run(s0, t_out, seg_t, seg_d, p, b, h, out)
+        status = integ.run.generic(integ.METHOD_RK4, s0, t_out, seg_t, seg_d, p, b, h, 0.0,
+                                   np.zeros(1), out, scene.ball_count, bits)
+        assert status[0] == integ.STATUS_OK
+        runs.append(out)
+        lam = np.empty(s0.size)
+        mdl.drag_rates(0.3, out[30], p, b, seg_d[0], lam, bits)
+        lams.append(lam)
+    assert np.array_equal(runs[0], runs[1])
+    assert np.array_equal(lams[0], lams[1])
+
+
+@pytest.mark.parametrize("name,motor", [("yoshida_odd", False), ("yoshida_odd5", True)])
+def test_specialised_kernel_equals_the_general_one(name, motor):
+    """A kernel compiled for one ball count and effect set (the vectorised one) does the same
+    arithmetic as the general kernel: the same trajectory bit for bit (two effect sets: each
+    specialisation takes a while to compile)."""
+    from abb_gym.physics import integrators as integ
+    scene, p, b, s0, t_out, seg_t, seg_d, h = _run_case(name, motor)
+    spec = mdl.spec_of(p, seg_d)
+    runs = []
+    for call in (integ.run, integ.run.generic):
+        out = np.empty((t_out.size, s0.size))
+        status = call(integ.METHOD_RK4, s0, t_out, seg_t, seg_d, p, b, h, 0.0, np.zeros(1), out,
+                      scene.ball_count, spec)
         assert status[0] == integ.STATUS_OK
         runs.append(out)
     assert np.array_equal(runs[0], runs[1])
-    lam = [np.empty(s0.size), np.empty(s0.size)]
-    mdl.drag_rates_plain(0.3, runs[0][30], p, b, seg_d[0], lam[0])
-    mdl.drag_rates_extended(0.3, runs[0][30], p, b, seg_d[0], lam[1])
-    assert np.array_equal(lam[0], lam[1])
 
 
 def test_drive_classes_evaluate_the_kernel_drive_law():
@@ -348,4 +368,5 @@ def test_drive_classes_evaluate_the_kernel_drive_law():
     limits = [min(1e-2, 0.5 / v if v else np.inf) for v in speeds]
     want = [np.clip(1e-2 / 300.0 * (300.0 - v), -e, e) for v, e in zip(speeds, limits)]
     assert np.allclose(motor.torque_at(times, speeds, scene), want, rtol=1e-12, atol=1e-15)
-    assert np.array_equal(motor.torque_at(times, speeds, scene), dl.motor_torques(times, speeds, rows))
+    assert np.array_equal(motor.torque_at(times, speeds, scene),
+                          dl.motor_torques(times, speeds, rows))

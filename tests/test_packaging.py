@@ -61,6 +61,9 @@ def _run(cmd, cwd, env, timeout=900):
 
 @pytest.mark.wheel
 def test_wheel_installed_outside_the_checkout(tmp_path):
+    # as `make wheel`: compile the kernels into abb_gym/_kernels first, so the wheel ships them
+    _run([sys.executable, "-m", "abb_gym.cli", "build-kernels", "--quiet"], cwd=REPO,
+         env=os.environ, timeout=1800)
     dist = tmp_path / "dist"
     _run([sys.executable, "-m", "pip", "wheel", str(REPO), "--no-deps", "-q", "-w", str(dist)],
          cwd=tmp_path, env=os.environ)
@@ -74,6 +77,10 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
           f"{wheel}[train]"], cwd=tmp_path, env=env, timeout=1500)
     work = tmp_path / "elsewhere"
     work.mkdir()
+    where = "import abb_gym._kernels as k, os; print(os.path.dirname(k.__file__))"
+    site = _run([str(py), "-c", where], cwd=work, env=env).strip().splitlines()[-1]
+    shipped = {p.name for p in Path(site).glob("*.nbc")}
+    assert shipped, f"the wheel ships no compiled kernels in {site}"
     script = textwrap.dedent("""
         import json, gymnasium as gym, numpy as np, abb_gym
         from abb_gym import resources
@@ -102,3 +109,32 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     want = tuned["families"]["speed_dwell"]["params"]
     assert "(tuned)" in names[1], names
     assert data["policies"][1]["params"] == pytest.approx(want)
+    # nothing was compiled: every kernel these calls used came from the wheel
+    assert {p.name for p in Path(site).glob("*.nbc")} == shipped
+
+
+def test_compiled_modules_have_distinct_file_names():
+    # numba names a cache file after the module's file name, the function and its line, and
+    # abb_gym/_kernels is one flat folder (abb_gym/_jit_cache.py): two compiled modules of the
+    # same file name could overwrite each other's caches
+    from abb_gym import _jit_cache
+    compiled = [p for p in (REPO / "abb_gym").rglob("*.py")
+                if _jit_cache._IMPORTS_NUMBA.search(p.read_bytes())]
+    names = [p.name for p in compiled]
+    assert len(compiled) > 5 and len(set(names)) == len(names), sorted(names)
+
+
+def test_cache_stamp_is_the_content_fingerprint_not_the_file_time(tmp_path):
+    # an installed wheel gives the sources new modification times; the shipped caches must
+    # stay valid, so a cache is stamped with the sources' content
+    from abb_gym import _jit_cache
+    from abb_gym.physics import batch
+    from numba.core import caching
+    cache_impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    assert cache_impl._locator_classes[0].__name__ == "PackageCacheLocator"
+    locator = cache_impl._locator_classes[0].from_function(batch.advance_block.py_func,
+                                                           batch.__file__)
+    if locator is None:
+        pytest.skip("package folder not writable or NUMBA_CACHE_DIR set")
+    assert locator.get_source_stamp() == _jit_cache.sources_fingerprint()
+    assert locator.get_cache_path() == str(_jit_cache.KERNELS)

@@ -31,13 +31,11 @@ from ..physics import drive_law as dl
 from ..physics.drives import SpeedProfile
 from ..physics.rotor import spinning_inertia
 from ..physics.scene import Scene
-from . import profiles
-from .closed_loop import CLOSED_LOOP
+from .families import FAMILY_NAMES, build_family
 
 __all__ = ["BaselinePolicy", "ClosedLoopPolicy", "SpeedReferencePolicy", "tuned_parameters",
            "tuned_file", "make_baseline", "load_baseline", "dwell_action", "FAMILY_NAMES"]
 
-FAMILY_NAMES = tuple(profiles.FAMILIES) + tuple(CLOSED_LOOP)
 
 
 def tuned_file(scene_name: str):
@@ -55,7 +53,7 @@ def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
     if not entry or "params" not in entry:
         return None
     # validated against the family's declared parameters (unit, bounds)
-    return profiles.build_family(family, **dict(entry["params"])).to_params()
+    return build_family(family, **dict(entry["params"])).to_params()
 
 
 class SpeedReferencePolicy:
@@ -75,6 +73,7 @@ class SpeedReferencePolicy:
     params: dict[str, Any] = {}
 
     def _bind(self, env) -> None:
+        self._env = env.unwrapped
         setup = env.unwrapped.setup
         self.setup = setup
         self.kind = setup.kind
@@ -121,9 +120,10 @@ class BaselinePolicy(SpeedReferencePolicy):
         n = obs.shape[0]
         if self.kind == "dwell":
             return np.stack([dwell_action(self.setup, self._profile(i)) for i in range(n)])
-        # an open-loop drive knows the time and its own speed exactly
-        t = np.asarray(info["time"], float)
-        w = np.asarray(info["rotor_speed"], float)
+        # an open-loop drive knows the time and its own speed exactly (from the environment,
+        # so that it works with any info level)
+        t = self._env.times
+        w = self._env.rotor_speeds
         reference = dl.prescribed_speeds(t + self.dt, self._tables, self._n_rows)
         return self._actions(reference, w)
 
@@ -166,7 +166,7 @@ def make_baseline(family: str, scene: Scene, operating_speed: float | None = Non
         params = tuned_parameters(scene.name, family)
     params = dict(params or {})
     label = f"baseline:{family}" + (" (tuned)" if params else " (default)")
-    fam = profiles.build_family(family, **params)
+    fam = build_family(family, **params)
     if fam.closed_loop:
         return ClosedLoopPolicy(label, fam, params)
     return BaselinePolicy(label, fam.profile(sc), params)

@@ -45,7 +45,7 @@ from ..configuration import build as build_config
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene
 
-__all__ = ["FAMILIES", "Family", "build_family", "build", "duration", "default_accel",
+__all__ = ["FAMILIES", "Family", "build", "duration", "default_accel",
            "default_dwell_time", "scales", "Ramp", "SpeedDwell", "AccelDwell", "DecelDwell",
            "SpeedReduction", "Knots"]
 
@@ -266,21 +266,12 @@ FAMILIES: dict[str, type[Family]] = {
     f.name: f for f in (Ramp, SpeedDwell, AccelDwell, DecelDwell, SpeedReduction, Knots)}
 
 
-def build_family(name: str, **params: Any) -> Family:
-    """The family ``name`` with ``params`` (validated against its declarations)."""
-    from .closed_loop import CLOSED_LOOP
-    table = {**FAMILIES, **CLOSED_LOOP}
-    if name not in table:
-        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(table)}")
-    return build_config(table[name], params, f"baseline {name}")
-
-
 def build(name: str, scene: Scene, **params: Any) -> SpeedProfile:
     """The profile of open-loop family ``name`` for ``scene`` (unknown names raise)."""
     if name not in FAMILIES:
         raise ValueError(f"unknown baseline {name!r} (open-loop families: "
                          f"{', '.join(FAMILIES)})")
-    return build_family(name, **params).profile(scene)
+    return build_config(FAMILIES[name], params, f"baseline {name}").profile(scene)
 
 
 def duration(profile: SpeedProfile) -> float:

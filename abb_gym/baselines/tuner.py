@@ -30,18 +30,11 @@ from tqdm import tqdm
 from ..evaluation.evaluate import Chunk, run_chunk
 from ..physics import rotor
 from . import profiles
-from .baseline_policy import BaselinePolicy, ClosedLoopPolicy, FAMILY_NAMES
-from .closed_loop import CLOSED_LOOP
+from .baseline_policy import BaselinePolicy, ClosedLoopPolicy
+from .families import FAMILY_NAMES, build_family, family_class
 
 ENV_ID = "abb_gym/RunUpSpeed-v0"
 OBJECTIVE = "mean return on the preset (the environment's reward)"
-
-
-def _family_class(name: str):
-    table = {**profiles.FAMILIES, **CLOSED_LOOP}
-    if name not in table:
-        raise ValueError(f"unknown baseline family {name!r}; available: {', '.join(table)}")
-    return table[name]
 
 
 def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
@@ -61,7 +54,7 @@ def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
 
 def params_from_unit(family: str, x: np.ndarray, scales: dict[str, float]) -> dict[str, Any]:
     """Family parameters from a point ``x`` of the unit cube of its search space."""
-    space = profiles.search_space(_family_class(family))
+    space = profiles.search_space(family_class(family))
     out: dict[str, Any] = {}
     for (name, index, lo, hi, unit), u in zip(space, np.clip(x, 0.0, 1.0)):
         v = (lo + float(u) * (hi - lo)) * scales[unit]
@@ -87,13 +80,14 @@ class CandidateTask:
     candidates: tuple[tuple[tuple[str, Any], ...], ...]
     episodes: tuple[int, ...]
     seed: int
+    env_kwargs: tuple[tuple[str, Any], ...] = ()
 
 
 def _policy_for(task: CandidateTask, pairs):
     def factory(env):
         setup = env.unwrapped.setup
         sc = setup.scene.replace(drive_operating_speed=setup.operating_speed)
-        fams = [profiles.build_family(task.family, **dict(task.candidates[c])) for c, _ in pairs]
+        fams = [build_family(task.family, **dict(task.candidates[c])) for c, _ in pairs]
         name = f"baseline:{task.family}"
         if fams[0].closed_loop:
             return ClosedLoopPolicy(name, fams)
@@ -104,7 +98,7 @@ def _policy_for(task: CandidateTask, pairs):
 def _run_candidates(task: CandidateTask) -> list[dict]:
     pairs = [(c, k) for c in range(len(task.candidates)) for k in task.episodes]
     chunk = Chunk(task.env_id, task.scene, task.preset, f"sweep:{task.family}", task.seed,
-                  tuple(k for _, k in pairs))
+                  tuple(k for _, k in pairs), env_kwargs=task.env_kwargs)
     episodes, _ = run_chunk(chunk, _policy_for(task, pairs))
     for (c, _), row in zip(pairs, episodes):
         row["candidate"] = c
@@ -117,18 +111,20 @@ SUMMARY_KEYS = ("return", "run_up_time", "residual_vibration", "peak_whirl", "at
 
 def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], episodes: int,
                         seed: int, preset: str, executor=None, per_task: int = 256,
-                        env_id: str = ENV_ID, progress: bool = False) -> list[dict]:
+                        env_id: str = ENV_ID, progress: bool = False,
+                        env_kwargs: dict[str, Any] | None = None) -> list[dict]:
     """Mean metrics of each candidate over ``episodes`` seeded episodes (the residual over the
     episodes that settled; ``at_speed`` is the share that did)."""
     from ..physics.scene import load_scene
     load_scene(scene_name)  # validate early, with the scene's own error message
     for c in candidates:
-        profiles.build_family(family, **c)  # validate every candidate before any runs
+        build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // episodes)
     cand = [tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in c.items()))
             for c in candidates]
+    kw = tuple(sorted((env_kwargs or {}).items()))
     tasks = [CandidateTask(env_id, scene_name, preset, family, tuple(cand[a:a + per]),
-                           tuple(range(episodes)), seed)
+                           tuple(range(episodes)), seed, kw)
              for a in range(0, len(cand), per)]
     if executor is None:  # this process; the vector environment already uses every core
         parts = [_run_candidates(t) for t in tqdm(tasks, desc=f"{family}: candidate batches",
@@ -150,12 +146,12 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
 
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
-                executor, bar) -> tuple[dict, dict, int]:
+                executor, bar, env_kwargs) -> tuple[dict, dict, int]:
     import cma
 
-    space = profiles.search_space(_family_class(family))
+    space = profiles.search_space(family_class(family))
     default = evaluate_candidates(scene_name, family, [{}], episodes, seed, preset, executor,
-                                  env_id=env_id)[0]
+                                  env_id=env_id, env_kwargs=env_kwargs)[0]
     bar.update(1)
     best = default
     evaluations = 1
@@ -169,7 +165,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
             xs = es.ask()
             cands = [params_from_unit(family, x, scales) for x in xs]
             rows = evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
-                                       executor, env_id=env_id)
+                                       executor, env_id=env_id, env_kwargs=env_kwargs)
             es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9 for r in rows])
             evaluations += len(rows)
             bar.update(len(rows))
@@ -182,20 +178,23 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
 def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: int = 24,
          seed: int = 20_000, preset: str = "train", executor=None,
          out: str | Path | None = None, force: bool = False, popsize: int | None = None,
-         env_id: str = ENV_ID, progress: bool = True) -> dict[str, Any]:
+         env_id: str = ENV_ID, progress: bool = True,
+         env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
     """Tune each family with CMA-ES (module docstring): ``budget`` candidates per family, each
-    scored on ``episodes`` seeded episodes of ``preset``.  Returns the result and, with
-    ``out``, writes it there (:func:`write_tuned`)."""
+    scored on ``episodes`` seeded episodes of ``preset`` (with ``env_kwargs``, e.g. the reward
+    weights an agent was trained with, so that both optimise the same return).  Returns the
+    result and, with ``out``, writes it there (:func:`write_tuned`)."""
     import cma
 
     families = tuple(families)
     for fam in families:
-        _family_class(fam)
+        family_class(fam)
     if budget < 1 or episodes < 1:
         raise ValueError(f"budget and episodes must be >= 1 (got {budget}, {episodes})")
     scales = search_scales(scene_name, env_id, preset)
     result: dict[str, Any] = {
-        "scene": scene_name, "env": env_id, "preset": preset, "episodes": episodes,
+        "scene": scene_name, "env": env_id, "preset": preset,
+        "env_kwargs": dict(env_kwargs or {}), "episodes": episodes,
         "seed": seed, "optimiser": f"CMA-ES (cma {cma.__version__}), {budget} candidates per "
                                    f"family", "objective": OBJECTIVE, "families": {}}
     with tqdm(total=budget * len(families), desc=f"tune {scene_name}", unit="candidate",
@@ -203,7 +202,7 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
         for fam in families:
             bar.set_postfix_str(fam)
             best, default, n = _cma_search(fam, scene_name, scales, budget, popsize, episodes,
-                                           seed, preset, env_id, executor, bar)
+                                           seed, preset, env_id, executor, bar, env_kwargs)
             result["families"][fam] = {
                 "params": _rounded(best["params"]),
                 "mean_return": round(best["return"], 5),
@@ -255,7 +254,7 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
     rng = np.random.default_rng(seed + 7)
     rows = []
     for fam in families:
-        d = len(profiles.search_space(_family_class(fam)))
+        d = len(profiles.search_space(family_class(fam)))
         if d == 0:
             continue
         cube = (np.stack([rng.permutation(n) for _ in range(d)], axis=1) + rng.random((n, d))) / n

@@ -62,7 +62,8 @@ def _kernel_steps(scene, profile, n_steps, dt):
     for k in range(n_steps):
         t_pair[0] = k * CONTROL_DT
         t_pair[1] = (k + 1) * CONTROL_DT
-        integ.run(integ.METHOD_RK4, s, t_pair, seg_t, seg_d, p, b, dt, 0.0, integ._NO_ATOL, out)
+        integ.run(integ.METHOD_RK4, s, t_pair, seg_t, seg_d, p, b, dt, 0.0, integ._NO_ATOL, out,
+                  b.shape[0], mdl.spec_of(p, seg_d))
         s = out[1].copy()
         traj[k + 1] = s
     return traj

@@ -83,7 +83,7 @@ def as_action_array(action: Any, shape: tuple[int, ...], what: str = "action") -
 class ActionModel:
     """The Python side of one action kind (see the module docstring).  ``setup`` arguments are
     :class:`abb_gym.envs.setup.EnvSetup`, ``bufs`` :class:`~abb_gym.envs.setup.Buffers`, ``ep``
-    :class:`~abb_gym.envs.setup.Episode`."""
+    :class:`~abb_gym.envs.episodes.Episode`."""
 
     name = ""
     kind_id = -1
@@ -114,19 +114,25 @@ class ActionModel:
     def check(self, setup: Any) -> None:
         """Raise PresetError if the preset does not suit this action type."""
 
-    def reset_rows(self, d: np.ndarray, ep: Any, setup: Any) -> None:
-        """Drive rows of environment row ``d`` at the start of episode ``ep`` (rotor at rest)."""
-        d[:, dl.D_MODE] = self.mode
+    def reset_rows(self, d: np.ndarray, imbalance_phase: np.ndarray, setup: Any) -> None:
+        """Drive rows ``d`` (environments x rows x N_DRIVE, zeroed) at the start of episodes
+        with rotor angles ``imbalance_phase`` [rad] (rotor at rest)."""
+        d[..., dl.D_MODE] = self.mode
         if self.mode == dl.MODE_PRESCRIBED:
-            d[:, dl.D_TH0] = ep.imbalance_phase
+            d[..., dl.D_TH0] = np.asarray(imbalance_phase)[:, None]
         else:
-            d[:, dl.D_TLIM] = setup.torque_limit
+            d[..., dl.D_TLIM] = setup.torque_limit
 
     def before_step(self, setup: Any, bufs: Any, i: int, action: np.ndarray,
                     ep: Any) -> dict[str, Any] | None:
         """Python-side work before the compiled step of row ``i`` (clipped ``action``);
         returns extra info for that row, or None."""
         return None
+
+    @property
+    def works_before_step(self) -> bool:
+        """True if this kind overrides :meth:`before_step` (the others skip the call)."""
+        return type(self).before_step is not ActionModel.before_step
 
 
 class TorqueAction(ActionModel):

@@ -15,13 +15,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import logger
 
-from . import kernel
-from .actions import ActionModel, as_action_array
-from .info import step_info
+from .actions import as_action_array
+from .info import check_info_level, step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
-from .setup import Buffers, EnvSetup, Episode, SetupAccess
+from .episodes import Episode, EpisodeTable
+from .setup import Buffers, EnvSetup, SetupAccess
 
 COMMON_DOC = textwrap.dedent(r"""
     ## Observation Space
@@ -110,6 +110,12 @@ COMMON_DOC = textwrap.dedent(r"""
 
     ## Info
 
+    ``info_level="lean"`` (default) keeps the per-step ``info`` to ``reward_terms`` (and
+    ``failure`` when one happens): the step of a training loop pays for nothing else.  The
+    step that ends an episode (terminated or truncated), and ``reset``, carry every key below,
+    so the final info always holds the run-up metrics.  ``info_level="full"`` gives every key at
+    every step.
+
     | Key | Meaning |
     |-----|---------|
     | reward_terms | dict vibration, time, effort, residual, failure (sum = reward) |
@@ -144,7 +150,9 @@ COMMON_DOC = textwrap.dedent(r"""
 
     ``scene`` (name, path or Scene; default "yoshida_odd"), ``preset`` (name in
     ``configs/envs``, path, dict or EnvConfig; default "train"), ``observe_balls`` (False),
-    ``render_mode`` (None, "rgb_array", "human"), ``max_episode_steps`` (backstop, None), and any
+    ``render_mode`` (None, "rgb_array", "human"), ``max_episode_steps`` (backstop, None),
+``record_history`` (False: keep a per-interval history, :meth:`history`), ``info_level``
+("lean" or "full", above), and any
     preset field as a keyword (``control_interval=0.02``, ``reward={"time": 2.0}``, ...).
 
     ## Bad input
@@ -165,10 +173,11 @@ class BalancerEnv(SetupAccess, gym.Env):
     def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,
                  observe_balls: bool = False, render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
-                 **overrides: Any):
+                 info_level: str = "lean", **overrides: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of "
                              f"{self.metadata['render_modes']} (got {render_mode!r})")
+        self.info_level = check_info_level(info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
         self.observation_space = self.setup.observation_space
@@ -181,6 +190,7 @@ class BalancerEnv(SetupAccess, gym.Env):
             raise ValueError(f"record_history must be True or False (got {record_history!r})")
         self._bufs = Buffers(self.setup, 1, n_trace=1 if (render_mode or record_history) else 0)
         self._renderer: Renderer | None = None
+        self._table = EpisodeTable(self.setup.scene, 1)
         self._episode: Episode | None = None
         self._done = False
         self._warned_clip = False
@@ -193,6 +203,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         """Cache views and the kernel argument tuple (rebuilt after unpickling)."""
         bf = self._bufs
         self._args = bf.kernel_args()
+        self._step_fn = None  # the compiled step, fetched at the first step
         self._act_row = bf.act[0]
         self._obs_row = bf.obs[0]
         self._out_row = bf.out[0]
@@ -205,8 +216,8 @@ class BalancerEnv(SetupAccess, gym.Env):
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_renderer", "_args", "_act_row", "_obs_row", "_out_row", "_st_row",
-                    "_s_row"):
+        for key in ("_renderer", "_args", "_step_fn", "_act_row", "_obs_row", "_out_row",
+                    "_st_row", "_s_row"):
             state.pop(key, None)
         return state
 
@@ -249,14 +260,13 @@ class BalancerEnv(SetupAccess, gym.Env):
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        ep = self.setup.draw_episode(self.np_random, options)
-        self.setup.write_episode(self._bufs, 0, ep)
+        self.setup.reset_rows(self._bufs, self._table, [0], [self.np_random], [options])
         self._bufs.observe(np.zeros(1, dtype=np.int64))
-        self._episode = ep
-        self._ref_len = ep.scene.reference_length
+        ep = self._episode = self._table.episode(0)
+        self._ref_len = float(self._table.reference_length[0])
         self._done = False
         self.last_profile = None
-        info = self._info()
+        info = self._info(level="full")
         info.update(ep.as_info())
         if self.render_mode == "human":
             self.render()
@@ -271,7 +281,7 @@ class BalancerEnv(SetupAccess, gym.Env):
             self._warned_done = True
         a = as_action_array(action, self.action_space.shape)
         extra = None
-        if not self._done and self.setup.actions.before_step is not ActionModel.before_step:
+        if not self._done and self.setup.actions.works_before_step:
             self._check_finite(a, action)
             clipped = np.clip(a, -1.0, 1.0)
             if np.any(clipped != a):
@@ -281,7 +291,10 @@ class BalancerEnv(SetupAccess, gym.Env):
             if extra:
                 self.last_profile = extra.pop("profile", None)
         self._act_row[:] = a
-        kernel.step_serial(*self._args)
+        step = self._step_fn
+        if step is None:
+            step = self._step_fn = self._bufs.step_function()
+        step(*self._args)
         out = self._out_row
         flag = out[O_ACTFLAG]
         if flag == ACT_NONFINITE:
@@ -291,7 +304,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         terminated = bool(out[O_TERM] != 0.0)
         truncated = bool(out[O_TRUNC] != 0.0)
         self._done = terminated or truncated
-        info = self._info()
+        info = self._info(done=self._done)
         if extra:
             info.update(extra)
         if self.render_mode == "human":
@@ -310,8 +323,9 @@ class BalancerEnv(SetupAccess, gym.Env):
             logger.warn(f"action {action!r} outside [-1, 1] was clipped (warned once)")
             self._warned_clip = True
 
-    def _info(self) -> dict[str, Any]:
-        return step_info(self.setup, self._out_row, self._st_row, self._s_row, self._ref_len)
+    def _info(self, level: str | None = None, done: bool = False) -> dict[str, Any]:
+        return step_info(self.setup, self._out_row, self._st_row, self._s_row, self._ref_len,
+                         level or self.info_level, done)
 
     def render(self):
         if self.render_mode is None:

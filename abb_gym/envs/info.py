@@ -15,7 +15,16 @@ from ..physics import runup
 from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
                      TERM_NAMES)
 
-__all__ = ["step_info", "masked", "episode_info"]
+__all__ = ["step_info", "masked", "INFO_LEVELS", "check_info_level"]
+
+INFO_LEVELS = ("lean", "full")
+
+
+def check_info_level(level: Any) -> str:
+    """``level`` if it is one of :data:`INFO_LEVELS`, else a ValueError naming them."""
+    if level not in INFO_LEVELS:
+        raise ValueError(f"info_level must be one of {INFO_LEVELS} (got {level!r})")
+    return level
 
 # key -> (buffer, column, conversion): the one definition of every per-step key
 #   "value": the entry; "bool": entry != 0; "times_dt": entry x control interval [s];
@@ -47,9 +56,37 @@ def _state_column(name: str, nq: int):
     return nq + 2 if name == "rotor_speed" else slice(3, nq)
 
 
-def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len) -> dict[str, Any]:
+def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
+    """The lean keys: ``reward_terms`` and, on a failure, ``failure``."""
+    single = out.ndim == 1
+    if single:
+        info: dict[str, Any] = {"reward_terms": {name: float(out[col]) for name, col
+                                                 in zip(TERM_NAMES, TERM_COLUMNS)}}
+        code = out[O_FCODE]
+        if code:
+            info["failure"] = setup.failure_message(int(code), out, st, s)
+        return info
+    info = {"reward_terms": {name: out[:, col].copy() for name, col
+                             in zip(TERM_NAMES, TERM_COLUMNS)}}
+    code = out[:, O_FCODE]
+    if code.any():
+        msgs = np.full(code.shape[0], None, dtype=object)
+        for i in np.flatnonzero(code):
+            msgs[i] = setup.failure_message(int(code[i]), out[i], st[i], s[i])
+        info["failure"] = msgs
+    return info
+
+
+def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len,
+              level: str = "full", done=None) -> dict[str, Any]:
     """The per-step keys from the buffers ``out``, ``st``, ``s``: pass one row (1-D views:
-    the single environment gets Python scalars) or every row (2-D: arrays over rows)."""
+    the single environment gets Python scalars) or every row (2-D: arrays over rows).
+
+    ``level`` "full": every key; "lean": ``reward_terms`` (and ``failure``) only, plus every
+    key when an episode ends (``done``: bool, or a bool array over rows), so that the final
+    info of an episode always carries its run-up metrics."""
+    if level == "lean" and not np.any(done):
+        return _terms_and_failure(setup, out, st, s)
     nq = 3 + setup.scene.ball_count
     dt = setup.control_interval
     single = out.ndim == 1
@@ -99,20 +136,6 @@ def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len) ->
         for i in np.flatnonzero(code):
             msgs[i] = setup.failure_message(int(code[i]), out[i], st[i], s[i])
         info["failure"] = msgs
-    return info
-
-
-def episode_info(episodes: Sequence, rows) -> dict[str, np.ndarray]:
-    """The episode parameters (:meth:`abb_gym.envs.setup.Episode.as_info`) of ``rows``, as
-    arrays over all rows (other rows hold 0)."""
-    n = len(episodes)
-    per_row = {int(i): episodes[i].as_info() for i in rows}
-    info: dict[str, np.ndarray] = {}
-    for key, first in next(iter(per_row.values())).items():
-        arr = np.zeros((n,) + np.shape(first))
-        for i, values in per_row.items():
-            arr[i] = values[key]
-        info[key] = arr
     return info
 
 

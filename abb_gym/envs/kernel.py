@@ -2,18 +2,21 @@
 
 Every environment (single or vector, any action type) keeps its state in preallocated arrays
 with one row per environment (layouts: :mod:`abb_gym.envs.layout`) and advances them with
-**one** compiled call per step:
+**one** compiled call per step, :func:`step`.  The environments are taken in blocks of lanes
+(:class:`abb_gym.physics.batch.Blocks`; one lane for a single environment, up to 64 for a
+vector environment, blocks in parallel with ``numba.prange``).  For each block:
 
-* :func:`step_serial` (single environments) and :func:`step_parallel` (the native vector
-  environment, ``numba.prange`` over environments) both call :func:`_env_step` for each row,
-  so a sub-environment of the vector environment and a single environment do the same
-  arithmetic and agree bit for bit.
-* :func:`_env_step` turns the action into a drive row (:mod:`abb_gym.envs.actions`) or uses
-  the rows the Python side wrote (a whole-episode action), advances one control interval (or
-  every interval until the episode ends) with :func:`abb_gym.physics.batch.advance` - the
-  integrators of :func:`abb_gym.physics.integrators.run` over
-  :func:`abb_gym.physics.model.state_derivative` - and computes the reward terms, the
-  termination flags and the observation.
+1. each lane's row turns its action into a drive row (:mod:`abb_gym.envs.actions`) or keeps
+   the rows the Python side wrote (a whole-episode action) (:func:`_begin`);
+2. the lanes advance one control interval together (or, for a whole-episode action, every
+   interval until the episode ends) with :func:`abb_gym.physics.batch.advance_block` - the
+   integrators of :func:`abb_gym.physics.integrators.run` over
+   :func:`abb_gym.physics.model.accelerations_block` - and each interval's reward terms and
+   run-up metrics are booked per row (:func:`_interval_begin`, :func:`_interval_end`);
+3. each row sums its reward and writes its flags and observation (:func:`_finish`).
+
+A row gets the same arithmetic whichever block and lane it lands in, so a sub-environment of
+the vector environment and a single environment agree bit for bit.
 
 The reward and observation definitions are documented in :mod:`abb_gym.envs.base`.
 """
@@ -22,6 +25,8 @@ from __future__ import annotations
 import math
 
 from numba import njit, prange
+
+from ..physics.specialise import Specialised
 
 from ..physics import batch, rotor, runup
 from ..physics import drive_law as dl
@@ -92,13 +97,27 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace):
 
 
 @njit(cache=True)
-def _interval(i, s, p, b, d, st, cfg, out, ws, work):
-    """Advance environment ``i`` by one control interval and add its reward terms to ``out``.
+def _interval_begin(i, st, cfg, f, g, lane):
+    """Set lane ``lane``'s interval, step limit, drive table position and whirl rest position
+    for row ``i``'s next control interval."""
+    dt = cfg[C_DT]
+    kk = st[i, S_K]
+    f[batch.F_T0, lane] = kk * dt
+    f[batch.F_T1, lane] = (kk + 1.0) * dt
+    f[batch.F_HMAX, lane] = st[i, S_DTMAX]
+    f[batch.W_XS, lane] = st[i, S_XS]
+    f[batch.W_YS, lane] = st[i, S_YS]
+    g[batch.G_NSEG, lane] = int(st[i, S_NSEG])
+    g[batch.G_J, lane] = int(st[i, S_J])
 
-    The run-up metrics (:mod:`abb_gym.physics.runup`: the operating band, the settled entry,
-    the residual over the settling window) are updated here with the interval's vibration;
-    the reward's time and residual terms and the success condition read them.  Returns True
-    when the episode ended (terminated or truncated) in this interval.
+
+@njit(cache=True)
+def _interval_end(i, s, d, st, cfg, out, f, g, lane):
+    """Book row ``i``'s control interval just advanced in lane ``lane`` (its state already
+    copied back to ``s[i]`` unless it failed, in which case ``s[i]`` still holds the state at
+    the interval start): the run-up metrics (:mod:`abb_gym.physics.runup`: the operating band,
+    the settled entry, the residual over the settling window), the reward terms, failure and
+    success.  Returns True when the episode ended (terminated or truncated) in this interval.
     """
     nq = s.shape[1] // 2
     dt = cfg[C_DT]
@@ -106,45 +125,36 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
     t0 = kk * dt
     t1 = (kk + 1.0) * dt
     si = s[i]
-    wsi = ws[i]
-    backup = wsi[batch.WS_BACKUP]
-    for c in range(si.shape[0]):
-        backup[c] = si[c]
-    whirl = out[i, O_WINT:O_WDMAX + 1]
-    whirl[0] = 0.0
-    whirl[1] = 0.0
-    whirl[2] = st[i, S_XS]
-    whirl[3] = st[i, S_YS]
-    whirl[4] = 0.0
-    nseg = int(st[i, S_NSEG])
-    status, j, t_fail, bad, steps = batch.advance(si, t0, t1, d[i], nseg, int(st[i, S_J]),
-                                                  p[i], b[i], st[i, S_DTMAX], wsi, work[i],
-                                                  whirl, int(cfg[C_METHOD]))
-    st[i, S_J] = j
-    out[i, O_STEPS] += steps
+    status = g[batch.G_STATUS, lane]
+    st[i, S_J] = g[batch.G_J, lane]
+    out[i, O_STEPS] += g[batch.G_STEPS, lane]
+    out[i, O_WINT] = f[batch.W_INT, lane]
+    out[i, O_WMAX] = f[batch.W_MAX, lane]
+    out[i, O_WXS] = f[batch.W_XS, lane]
+    out[i, O_WYS] = f[batch.W_YS, lane]
+    out[i, O_WDMAX] = f[batch.W_DMAX, lane]
     st[i, S_K] = kk + 1.0
     acc = st[i, S_ACC:S_ACC + runup.N_ACC]
     wop = cfg[C_WOP]
     band = cfg[C_BAND]
     fail = FAIL_NONE
     if status != 0:
-        for c in range(si.shape[0]):
-            si[c] = backup[c]
         fail = FAIL_NUMERICAL
-        out[i, O_FTIME] = t_fail
-        out[i, O_FINDEX] = bad
+        out[i, O_FTIME] = f[batch.F_TFAIL, lane]
+        out[i, O_FINDEX] = g[batch.G_BAD, lane]
         dx = si[0] - st[i, S_XS]
         dy = si[1] - st[i, S_YS]
         r_mean = math.sqrt(dx * dx + dy * dy)
         r_max = math.sqrt(si[0] * si[0] + si[1] * si[1])
         at_speed = runup.in_band(si[nq + 2], wop, band)
     else:
-        r_mean = whirl[0] / dt
-        r_max = whirl[1]
-        at_speed = runup.update(acc, t0, t1, si[nq + 2], whirl[0], whirl[4], wop, band,
-                                cfg[C_SETTLE])
+        r_mean = out[i, O_WINT] / dt
+        r_max = out[i, O_WMAX]
+        at_speed = runup.update(acc, t0, t1, si[nq + 2], out[i, O_WINT], out[i, O_WDMAX], wop,
+                                band, cfg[C_SETTLE])
     w = si[nq + 2]
     # control effort: time integral of (drive command / its limit)^2 over the interval
+    nseg = int(st[i, S_NSEG])
     effort = 0.0
     for r in range(nseg):
         ts = d[i, r, dl.D_T0]
@@ -206,23 +216,26 @@ def _interval(i, s, p, b, d, st, cfg, out, ws, work):
 
 
 @njit(cache=True)
-def _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
+def _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
+    """The start of row ``i``'s step: check and clip the action, write the interval's drive
+    row.  Returns True if the row goes on to integrate (False: inactive, already finished,
+    or a non-finite action; the row's outputs are then complete)."""
     for c in range(out.shape[1]):
         out[i, c] = 0.0
     if active[i] == 0:
-        return
+        return False
     if st[i, S_DONE] != 0.0:
         # stepping a finished episode: nothing moves, no reward (the caller warns)
         out[i, O_TERM] = st[i, S_TERM]
         out[i, O_TRUNC] = st[i, S_TRUNC]
         _observe(i, s, p, b, st, cfg, obs, out, trace)
-        return
+        return False
     na = int(cfg[C_NACT])
     for a in range(na):
         if not math.isfinite(act[i, a]):
             out[i, O_ACTFLAG] = ACT_NONFINITE
             out[i, O_FINDEX] = a
-            return
+            return False
     flag = ACT_OK
     for a in range(na):
         v = act[i, a]
@@ -235,21 +248,21 @@ def _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
         st[i, S_ACT + a] = v
     out[i, O_ACTFLAG] = flag
     kind = int(cfg[C_KIND])
-    if actions.whole_episode(kind):
-        # the rows were written from the action: run the whole episode
-        done = False
-        while not done:
-            done = _interval(i, s, p, b, d, st, cfg, out, ws, work)
-            if not done:
-                _observe(i, s, p, b, st, cfg, obs, out, trace)  # fills the render trace
-    else:
+    if not actions.whole_episode(kind):
         nq = s.shape[1] // 2
         actions.write_interval_row(kind, d[i, 0], st[i, S_ACT], st[i, S_K] * cfg[C_DT],
                                    s[i, 2], s[i, nq + 2], cfg[C_DT], cfg[C_WOP], cfg[C_AMAX],
                                    cfg[C_TLIM])
         st[i, S_NSEG] = 1.0
         st[i, S_J] = 0.0
-        done = _interval(i, s, p, b, d, st, cfg, out, ws, work)
+    # (a whole-episode action's rows were written from the action on the Python side)
+    return True
+
+
+@njit(cache=True)
+def _finish(i, done, s, p, b, st, cfg, obs, out, trace):
+    """The end of row ``i``'s step: time limit, reward sum, episode flags, observation."""
+    kind = int(cfg[C_KIND])
     if cfg[C_BACKSTOP] > 0.0:
         # the rule of gymnasium's TimeLimit: truncated once elapsed steps >= the limit
         elapsed = 1.0 if actions.whole_episode(kind) else st[i, S_K]
@@ -265,18 +278,93 @@ def _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
     _observe(i, s, p, b, st, cfg, obs, out, trace)
 
 
-@njit(cache=True)
-def step_serial(act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
-    """One environment step for every row (serial; single environments)."""
-    for i in range(s.shape[0]):
-        _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active)
+# rows of the block's integer array that the environment step uses (beyond batch.N_G)
+G_STEPPING = batch.N_G      # the row started a step that integrates
+G_INTEGRATE = batch.N_G + 1  # the row takes part in the next interval
+G_DONE = batch.N_G + 2      # the row's episode ended in this step
+N_G_ENV = batch.N_G + 3
 
 
-@njit(cache=True, parallel=True)
-def step_parallel(act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active):
-    """One environment step for every row, in parallel over rows (vector environment)."""
-    for i in prange(s.shape[0]):
-        _env_step(i, act, s, p, b, d, st, cfg, obs, out, trace, ws, work, active)
+@njit(cache=True, error_model="numpy")
+def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
+                bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
+    """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``)."""
+    n_env = order.shape[0]
+    lanes = bs.shape[2]
+    ns = s.shape[1]
+    sb = bs[q]
+    pb = bp[q]
+    bbq = bb[q]
+    f = bf[q]
+    g = bg[q]
+    whole = actions.whole_episode(int(cfg[C_KIND]))
+    for l in range(lanes):
+        r = q * lanes + l
+        g[batch.G_ON, l] = 0
+        g[G_STEPPING, l] = 0
+        g[G_INTEGRATE, l] = 0
+        g[G_DONE, l] = 0
+        if r >= n_env:
+            continue
+        i = order[r]
+        g[batch.G_ROW, l] = i
+        if _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
+            g[G_STEPPING, l] = 1
+            g[G_INTEGRATE, l] = 1
+            batch.load_lane(s, p, b, i, sb, pb, bbq, l)
+    while True:
+        any_lane = False
+        for l in range(lanes):
+            g[batch.G_ON, l] = g[G_INTEGRATE, l]
+            if g[G_INTEGRATE, l] != 0:
+                _interval_begin(g[batch.G_ROW, l], st, cfg, f, g, l)
+                any_lane = True
+        if not any_lane:
+            break
+        batch.advance_block(sb, pb, bbq, bd[q], bk[q], btmp[q], blam[q], bcoef[q], bwork[q],
+                            f, g, bact[q], d, int(cfg[C_METHOD]), nb, spec)
+        for l in range(lanes):
+            if g[G_INTEGRATE, l] == 0:
+                continue
+            i = g[batch.G_ROW, l]
+            if g[batch.G_STATUS, l] == 0:
+                for c in range(ns):
+                    s[i, c] = sb[c, l]
+            done = _interval_end(i, s, d, st, cfg, out, f, g, l)
+            if done or not whole or g[batch.G_STATUS, l] != 0:
+                g[G_INTEGRATE, l] = 0
+                g[G_DONE, l] = 1 if done else 0
+            else:
+                _observe(i, s, p, b, st, cfg, obs, out, trace)  # fills the render trace
+    for l in range(lanes):
+        if g[G_STEPPING, l] != 0:
+            _finish(g[batch.G_ROW, l], g[G_DONE, l] != 0, s, p, b, st, cfg, obs, out, trace)
+
+
+@njit(cache=True, error_model="numpy")
+def _step_serial(order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd, bk,
+                 btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
+    for q in range(bs.shape[0]):
+        _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb,
+                    bd, bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _step_parallel(order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
+                   bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
+    for q in prange(bs.shape[0]):
+        _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb,
+                    bd, bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec)
+
+
+step_serial = Specialised(_step_serial, literal=(24, 25), names=("balls", "effects"))
+step_parallel = Specialised(_step_parallel, literal=(24, 25), names=("balls", "effects"))
+"""``step_serial`` / ``step_parallel`` (blocks in parallel) ``(order, act, s, p, b, d, st,
+cfg, obs, out, trace, active, *block_arrays, nb, spec)``: one environment step of every row
+(``order``: the rows in lane order, :func:`abb_gym.physics.batch.lane_order`;
+``block_arrays``: :meth:`abb_gym.physics.batch.Blocks.arrays`).  Called, they compile a kernel
+specialised on the ball count ``nb`` and the effects ``spec`` (vectorised across the lanes of a
+block); their ``.generic`` runs the general kernel, compiled once for every scene."""
 
 
 @njit(cache=True)

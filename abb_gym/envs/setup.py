@@ -1,16 +1,15 @@
-"""The Python side of an environment: preset, spaces, constants, episodes and buffers.
+"""The Python side of an environment: preset, spaces, constants and buffers.
 
-:class:`EnvSetup` resolves the scene and the preset, builds the spaces and the constants array
-``cfg`` of the compiled step (:mod:`abb_gym.envs.kernel`), draws each episode from the
-environment's ``np_random`` (:meth:`EnvSetup.draw_episode`) and writes its row
-(:meth:`EnvSetup.write_episode`).  What an action means is the action model's
+:class:`EnvSetup` resolves the scene and the preset and builds the spaces and the constants
+array ``cfg`` of the compiled step (:mod:`abb_gym.envs.kernel`); :class:`Buffers` holds the
+arrays of the rows and the blocks the step works in; :meth:`EnvSetup.reset_rows` draws and
+writes episodes (:mod:`abb_gym.envs.episodes`).  What an action means is the action model's
 (:mod:`abb_gym.envs.actions`); the machine's facts (reference amplitudes, best residual,
 static sag) come from :mod:`abb_gym.physics.rotor`.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -20,53 +19,31 @@ from ..physics import batch
 from ..physics import drive_law as dl
 from ..physics import integrators as integ
 from ..physics import model as mdl
-from ..physics import rotor, runup
+from ..physics import rotor
 from ..physics.scene import Scene, load_scene
-from ..physics.simulate import default_step, state_names
+from ..physics.simulate import state_names
+from ..physics.specialise import resolve_kernel
+from . import episodes
 from .actions import ActionModel, action_model
 from .config import EnvConfig, PresetError, load_preset
-from .kernel import observe_rows
-from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_CLEAR, C_DT, C_FILT, C_KIND, C_METHOD,
-                     C_NACT, C_NMAX, C_SETTLE, C_OBS_BALLS, C_OVERSPEED, C_SPEED_HI,
-                     C_SPEED_LO, C_TEP, C_TLIM, C_BAND, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF,
-                     C_WOP, C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED,
-                     N_CFG, N_OUT, N_ST, O_FINDEX, O_FTIME, S_AOP, S_AREF, S_DONE, S_DTMAX,
-                     S_ACC, S_NSEG, S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_K, S_XS, S_YS, T_BALLS, T_T, T_VIB, T_VIBMAX, T_W,
-                     T_X, T_Y)
+from . import kernel
+from .kernel import N_G_ENV, observe_rows
+from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT, C_KIND,
+                     C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OVERSPEED, C_SETTLE, C_SPEED_HI,
+                     C_SPEED_LO, C_TEP, C_TLIM, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP,
+                     C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG,
+                     N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
+                     T_VIB, T_VIBMAX, T_W, T_X, T_Y)
 
-__all__ = ["EnvSetup", "Episode", "Buffers", "RESET_OPTIONS", "SetupAccess"]
-
-
-@dataclass
-class Episode:
-    """Parameters of one episode (drawn by :meth:`EnvSetup.draw_episode`)."""
-
-    scene: Scene
-    imbalance: float
-    imbalance_phase: float
-    ball_angles: np.ndarray
-    ball_drag_scale: float
-    rolling_resistance_scale: float
-    integration_step: float
-    static_deflection: tuple[float, float] = (0.0, 0.0)
-
-    def as_info(self) -> dict[str, Any]:
-        return {"imbalance": self.imbalance, "imbalance_phase": self.imbalance_phase,
-                "initial_ball_angles": self.ball_angles.copy(),
-                "ball_drag_scale": self.ball_drag_scale,
-                "rolling_resistance_scale": self.rolling_resistance_scale,
-                "integration_step": self.integration_step,
-                "static_deflection": np.array(self.static_deflection)}
-
-
-RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
-                 "ball_drag_scale", "rolling_resistance_scale")
+__all__ = ["EnvSetup", "Buffers", "SetupAccess", "resolve_kernel"]
 
 
 class Buffers:
-    """The preallocated arrays of ``n`` environments (rows)."""
+    """The preallocated arrays of ``n`` environments (rows), in blocks of lanes for the
+    compiled step (:mod:`abb_gym.envs.kernel`)."""
 
-    def __init__(self, setup: "EnvSetup", n: int, n_trace: int = 0):
+    def __init__(self, setup: "EnvSetup", n: int, n_trace: int = 0, kernel: str | None = None,
+                 lanes: int | None = None):
         nb = setup.scene.ball_count
         ns = 2 * (3 + nb)
         self.act = np.zeros((n, setup.n_actions))
@@ -81,14 +58,36 @@ class Buffers:
         self.out = np.zeros((n, N_OUT))
         k = setup.max_steps + 1 if n_trace > 0 else 0
         self.trace = np.zeros((min(n_trace, n), k, T_BALLS + nb))
-        self.ws, self.work = batch.make_workspace(n, nb)
         self.active = np.ones(n, dtype=np.uint8)
         self.cfg = setup.cfg
+        self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV)
+        self.order = np.arange(n, dtype=np.int64)
+        self.n_balls = nb
+        self.spec = setup.spec
+        self.kernel = resolve_kernel(kernel, self.blocks.lanes)
+        self._step = None
 
     def kernel_args(self) -> tuple:
-        """Arguments of :func:`step_serial` / :func:`step_parallel`, in order."""
-        return (self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs, self.out,
-                self.trace, self.ws, self.work, self.active)
+        """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``, in order."""
+        return (self.order, self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs,
+                self.out, self.trace, self.active, *self.blocks.arrays(), self.n_balls, self.spec)
+
+    def step_function(self):
+        """The compiled step's entry point, called with :meth:`kernel_args` (compiled or
+        loaded from the cache on the first call)."""
+        if self._step is None:
+            step = kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
+            self._step = step.entry(*self.kernel_args(), generic=self.kernel == "generic")
+        return self._step
+
+    def sort_lanes(self) -> None:
+        """Group rows of equal step size into the same blocks (after resets)."""
+        self.order[:] = batch.lane_order(self.st[:, S_DTMAX])
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_step"] = None  # compiled entry points do not pickle
+        return state
 
     def history(self, i: int) -> dict[str, np.ndarray]:
         """Row ``i``'s recorded history so far, one entry per control interval boundary
@@ -207,112 +206,22 @@ class EnvSetup:
         c[C_METHOD] = integ.METHOD_IDS[cfg.integrator]
         self.cfg = c
         self._state_names = state_names(nb)
+        # the compiled step's effect set: the nominal scene's (an episode only rescales the
+        # scene's drag and rolling resistance, so it never needs a term the nominal lacks)
+        p_nominal, _ = mdl.pack_parameters(sc)
+        row = np.zeros(dl.N_DRIVE)
+        row[dl.D_MODE] = am.mode
+        self.spec = mdl.spec_of(p_nominal, row)
 
     # ------------------------------------------------------------------ episodes
-    def draw_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None
-                     ) -> Episode:
-        """Draw one episode's parameters from ``rng`` (fixed order), then apply ``options``."""
-        sc = self.scene
-        rz = self.config.randomize
-        nb = sc.ball_count
-        cap = sc.balancing_capacity
-        imbalance = sc.imbalance
-        phase = 0.0
-        angles = np.asarray(sc.ball_angles0, dtype=float).copy()
-        drag = 1.0
-        roll = 1.0
-        if rz.imbalance_ratio is not None:
-            imbalance = float(rng.uniform(*rz.imbalance_ratio)) * cap
-        if rz.imbalance_phase is not None:
-            phase = float(rng.uniform(*rz.imbalance_phase))
-        if rz.ball_angles is not None:
-            angles = rng.uniform(rz.ball_angles[0], rz.ball_angles[1], size=nb)
-        if rz.ball_drag_scale is not None:
-            drag = float(rng.uniform(*rz.ball_drag_scale))
-        if rz.rolling_resistance_scale is not None:
-            roll = float(rng.uniform(*rz.rolling_resistance_scale))
-        if options:
-            if not isinstance(options, Mapping):
-                raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)}"
-                                 f" (got {options!r})")
-            unknown = sorted(set(options) - set(RESET_OPTIONS))
-            if unknown:
-                raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
-                                 f"{list(RESET_OPTIONS)}")
-            if "imbalance" in options and "imbalance_ratio" in options:
-                raise ValueError("reset options 'imbalance' and 'imbalance_ratio' exclude "
-                                 "each other")
-            if "imbalance" in options:
-                imbalance = _opt_number("imbalance", options["imbalance"], 0.0, "kg m")
-            if "imbalance_ratio" in options:
-                imbalance = _opt_number("imbalance_ratio", options["imbalance_ratio"], 0.0,
-                                        "-") * cap
-            if "imbalance_phase" in options:
-                phase = _opt_number("imbalance_phase", options["imbalance_phase"], None, "rad")
-            if "ball_angles" in options:
-                a = np.asarray(options["ball_angles"], dtype=float)
-                if a.ndim == 0:
-                    a = np.full(nb, float(a))
-                if a.shape != (nb,) or not np.all(np.isfinite(a)):
-                    raise ValueError(f"reset option 'ball_angles' must be {nb} finite angles "
-                                     f"[rad] (got {options['ball_angles']!r})")
-                angles = a.copy()
-            if "ball_drag_scale" in options:
-                drag = _opt_number("ball_drag_scale", options["ball_drag_scale"], 0.0, "-",
-                                   inclusive=False)
-            if "rolling_resistance_scale" in options:
-                roll = _opt_number("rolling_resistance_scale",
-                                   options["rolling_resistance_scale"], 0.0, "-")
-        changes: dict[str, Any] = {}
-        if imbalance != sc.imbalance:
-            changes["rotor_eccentricity"] = imbalance / sc.rotor_mass
-        if drag != 1.0:
-            changes["ball_drag"] = [v * drag for v in sc.ball_drag]
-        if roll != 1.0:
-            changes["ball_rolling_resistance"] = [v * roll for v in sc.ball_rolling_resistance]
-        ep_scene = sc.replace(**changes) if changes else sc
-        h = self.config.integration_step
-        if h is None:
-            h = default_step(ep_scene, self.max_speed, self.config.integrator)
-        return Episode(ep_scene, float(imbalance), float(phase), angles, float(drag),
-                       float(roll), float(h), rotor.static_deflection(ep_scene))
-
-    def write_episode(self, bufs: Buffers, i: int, ep: Episode) -> None:
-        """Reset row ``i`` of ``bufs`` to the start of episode ``ep`` (rotor at rest)."""
-        sc = ep.scene
-        nb = sc.ball_count
-        nq = 3 + nb
-        p, b = mdl.pack_parameters(sc)
-        bufs.p[i] = p
-        bufs.b[i] = b
-        xs, ys = ep.static_deflection
-        s = bufs.s[i]
-        s[:] = 0.0
-        s[0] = xs
-        s[1] = ys
-        s[2] = ep.imbalance_phase
-        s[3:nq] = ep.ball_angles
-        st = bufs.st[i]
-        st[:] = 0.0
-        runup.reset(st[S_ACC:S_ACC + runup.N_ACC])
-        st[S_XS] = xs
-        st[S_YS] = ys
-        u_ref = rotor.imbalance_scale(sc)
-        a_peak, a_op = rotor.reference_amplitudes(sc, self.operating_speed)
-        st[S_AREF] = a_peak
-        st[S_AOP] = a_op
-        st[S_USCALE] = u_ref
-        st[S_UBEST] = rotor.best_residual(sc)
-        st[S_DTMAX] = ep.integration_step
-        st[S_NSEG] = 1.0
-        w = self.config.reward
-        clear = sc.housing_clearance
-        st[S_PEN_RATE] = w.vibration * clear / a_peak + w.time + w.effort * self.effort_bound
-        st[S_PEN_TERM] = w.residual * clear / a_op
-        d = bufs.d[i]
-        d[:] = 0.0
-        self.actions.reset_rows(d, ep, self)
-        bufs.act[i] = 0.0
+    def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
+                   rngs: list, options: list | None = None) -> None:
+        """Draw the episodes of ``rows`` (row ``rows[k]`` from generator ``rngs[k]`` with reset
+        options ``options[k]``) and write them, all rows at once."""
+        values = [episodes.draw(self, rng, None if options is None else options[k])
+                  for k, rng in enumerate(rngs)]
+        imbalance, phase, angles, drag, roll = (np.array(v) for v in zip(*values))
+        episodes.write(self, bufs, table, rows, imbalance, phase, angles, drag, roll)
 
     # ------------------------------------------------------------------ info
     def failure_message(self, code: int, out_row: np.ndarray, st_row: np.ndarray,
@@ -332,19 +241,6 @@ class EnvSetup:
                     f"{self.config.overspeed:g} x the operating speed {self.operating_speed:g}"
                     f" rad/s at t = {t:.6g} s")
         return ""
-
-
-def _opt_number(name: str, value: Any, lo: float | None, unit: str, inclusive: bool = True
-                ) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"reset option {name!r} must be a number [{unit}] (got {value!r})"
-                         ) from None
-    if not math.isfinite(v) or (lo is not None and (v < lo or (v == lo and not inclusive))):
-        rng = "finite" if lo is None else f"{'>=' if inclusive else '>'} {lo:g}"
-        raise ValueError(f"reset option {name!r} must be {rng} [{unit}] (got {value!r})")
-    return v
 
 
 class SetupAccess:

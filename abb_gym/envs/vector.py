@@ -3,10 +3,19 @@
 ``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` returns one of
 these.  All sub-environments share the scene, the preset and the action type; each has its
 own episode parameters, random generator and state.  One ``step`` runs
-:func:`abb_gym.envs.kernel.step_parallel`, which advances every sub-environment with the same
-compiled per-environment function as the single environment (``numba.prange`` over
-environments, one thread pool launch per step), so sub-environment ``i`` and a single
-environment reset with the same seed follow the same trajectory bit for bit.
+the compiled step of :mod:`abb_gym.envs.kernel` over blocks of up to 64 sub-environments
+(``numba.prange`` over blocks, one thread pool launch per step), with the same per-row
+arithmetic as the single environment, so sub-environment ``i`` and a single environment reset
+with the same seed follow the same trajectory bit for bit.
+
+## Kernel
+
+``kernel="auto"`` (default; or ``$ABB_GYM_KERNEL``) runs, from 16 sub-environments (blocks of
+8 lanes or more), a kernel specialised on the scene's ball count and effects, whose lanes the
+compiler turns into vector instructions; it is compiled once per such combination (about a
+minute, announced on stderr) and cached on disk.  Below that, and with ``kernel="generic"``,
+the general kernel runs (compiled once for every scene).  Both give the same numbers bit for
+bit.
 
 ## Seeding
 
@@ -31,9 +40,12 @@ sub-environment, or give one value per sub-environment (an array of length ``num
 ## Info
 
 The single environment's keys as arrays of length ``num_envs`` with gymnasium's ``_key``
-masks; ``reward_terms`` is a dict of arrays.  ``failure`` (object array of messages) appears
-in steps where some sub-environment failed, masked by ``_failure``; the episode parameters
-(``imbalance``, ...) appear for the sub-environments reset in that step.
+masks; ``reward_terms`` is a dict of arrays.  With ``info_level="lean"`` (default) a step
+holds ``reward_terms`` (and ``failure``), plus every key, masked by the sub-environments whose
+episode ended in that step; ``info_level="full"`` gives every key at every step.  ``failure``
+(object array of messages) appears in steps where some sub-environment failed, masked by
+``_failure``; the episode parameters (``imbalance``, ...) appear for the sub-environments
+reset in that step.
 
 ## Actions
 
@@ -57,12 +69,12 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from . import kernel
-from .actions import ActionModel, as_action_array
-from .info import episode_info, masked, step_info
+from .actions import as_action_array
+from .info import check_info_level, masked, step_info
 from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
-from .setup import Buffers, EnvSetup, Episode, SetupAccess
+from .episodes import EpisodeTable
+from .setup import Buffers, EnvSetup, SetupAccess
 
 __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
            "DwellProfileVectorEnv"]
@@ -80,13 +92,14 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
     def __init__(self, num_envs: int = 1, scene: Any = "yoshida_odd", preset: Any = "train", *,
                  observe_balls: bool = False, render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
-                 **overrides: Any):
+                 kernel: str | None = None, info_level: str = "lean", **overrides: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of "
                              f"{self.metadata['render_modes']} (got {render_mode!r})")
+        self.info_level = check_info_level(info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
         self.num_envs = int(num_envs)
@@ -99,30 +112,44 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
             raise ValueError(f"record_history must be True or False (got {record_history!r})")
         n_trace = (self.num_envs if record_history
                    else min(self.num_envs, MAX_RENDERED) if render_mode else 0)
-        self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace)
+        self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace, kernel=kernel)
+        self._args = self._bufs.kernel_args()
+        self._step_fn = None  # the compiled step, fetched at the first step
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
-        self._episodes: list[Episode | None] = [None] * self.num_envs
+        self._table = EpisodeTable(self.setup.scene, self.num_envs)
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
         self._started = False
         self._warned_clip = False
         self._renderers: list[Renderer] | None = None
         self._dt = self.setup.control_interval
         self._nq = 3 + self.setup.scene.ball_count
-        self._ref_len = np.full(self.num_envs, self.setup.scene.reference_length)
+        self._ref_len = self._table.reference_length  # each episode's, updated at resets
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_renderers"] = None
+        state["_step_fn"] = None
+        state.pop("_args", None)
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._args = self._bufs.kernel_args()
+
+    @property
+    def kernel(self) -> str:
+        """The compiled step in use: "vectorised" (specialised on the scene's ball count and
+        effects, vector instructions across sub-environments) or "generic"."""
+        return self._bufs.kernel
 
     def episode(self, i: int):
         """Sub-environment ``i``'s current episode parameters (:class:`Episode`)."""
-        return self._episodes[i]
+        return self._table.episode(i)
 
     def episode_scene(self, i: int):
         """Sub-environment ``i``'s current episode as a Scene."""
-        ep = self._episodes[i]
+        ep = self._table.episode(i)
         return None if ep is None else ep.scene
 
     def history(self, i: int) -> dict[str, np.ndarray]:
@@ -134,6 +161,16 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
     def states(self) -> np.ndarray:
         """Copy of the model states, shape (num_envs, state length)."""
         return self._bufs.s.copy()
+
+    @property
+    def times(self) -> np.ndarray:
+        """Simulated time of each sub-environment's episode [s], shape (num_envs,)."""
+        return self._bufs.st[:, S_K] * self._dt
+
+    @property
+    def rotor_speeds(self) -> np.ndarray:
+        """Rotor speed of each sub-environment [rad/s], shape (num_envs,)."""
+        return self._bufs.s[:, self._nq + 2].copy()
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -164,11 +201,14 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         for i in rows:
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(seeds[i])
-            self._reset_row(int(i), self._options_for(int(i), options))
+        self._reset_rows(rows, [self._options_for(int(i), options) for i in rows]
+                         if options else None)
         self._bufs.observe(rows)
+        self._bufs.sort_lanes()
         self._prev_done[rows] = False
         self._started = True
-        info = self._info(np.ones(n, dtype=bool) if mask is None else mask, reset_rows=rows)
+        info = self._info(np.ones(n, dtype=bool) if mask is None else mask, reset_rows=rows,
+                          level="full")
         return self._bufs.obs.copy(), info
 
     def _options_for(self, i: int, options: dict[str, Any]) -> dict[str, Any] | None:
@@ -193,11 +233,10 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
                 out[key] = value
         return out
 
-    def _reset_row(self, i: int, options: dict[str, Any] | None) -> None:
-        ep = self.setup.draw_episode(self._rngs[i], options)
-        self.setup.write_episode(self._bufs, i, ep)
-        self._episodes[i] = ep
-        self._ref_len[i] = ep.scene.reference_length
+    def _reset_rows(self, rows: np.ndarray, options: list | None = None) -> None:
+        """Draw and write the episodes of ``rows`` (all at once)."""
+        self.setup.reset_rows(self._bufs, self._table, rows, [self._rngs[i] for i in rows],
+                              options)
 
     def step(self, actions):
         if not self._started:
@@ -215,16 +254,19 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
             self._warned_clip = True
         rows = np.flatnonzero(self._prev_done)
         if rows.size:
-            for i in rows:
-                self._reset_row(int(i), None)
+            self._reset_rows(rows)
             bf.active[:] = 1
             bf.active[rows] = 0
+            bf.sort_lanes()
         bf.act[:] = np.clip(a, -1.0, 1.0)
         am = self.setup.actions
-        if am.before_step is not ActionModel.before_step:
+        if am.works_before_step:
             for i in np.flatnonzero(bf.active):
-                am.before_step(self.setup, bf, int(i), bf.act[i], self._episodes[i])
-        kernel.step_parallel(*bf.kernel_args())
+                am.before_step(self.setup, bf, int(i), bf.act[i], self._table.episode(int(i)))
+        step = self._step_fn
+        if step is None:
+            step = self._step_fn = bf.step_function()
+        step(*self._args)
         if rows.size:
             bf.observe(rows)
             bf.active[:] = 1
@@ -234,16 +276,25 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         reward = out[:, O_REWARD].copy()
         self._prev_done = terminated | truncated
         mask = np.ones(n, dtype=bool)
-        info = self._info(mask, reset_rows=rows)
+        info = self._info(mask, reset_rows=rows, done=self._prev_done)
         return bf.obs.copy(), reward, terminated, truncated, info
 
-    def _info(self, mask: np.ndarray, reset_rows: np.ndarray) -> dict[str, Any]:
+    def _info(self, mask: np.ndarray, reset_rows: np.ndarray, level: str | None = None,
+              done: np.ndarray | None = None) -> dict[str, Any]:
         bf = self._bufs
-        info = masked(step_info(self.setup, bf.out, bf.st, bf.s, self._ref_len), mask)
+        level = level or self.info_level
+        info = step_info(self.setup, bf.out, bf.st, bf.s, self._ref_len, level, done)
+        if level == "lean" and done is not None and done.any():
+            # the details are for the rows whose episode ended
+            terms = masked({"reward_terms": info.pop("reward_terms")}, mask)
+            info = masked(info, done)
+            info.update(terms)
+        else:
+            info = masked(info, mask)
         if len(reset_rows):
             rmask = np.zeros(self.num_envs, dtype=bool)
             rmask[reset_rows] = True
-            info.update(masked(episode_info(self._episodes, reset_rows), rmask))
+            info.update(masked(self._table.info(reset_rows), rmask))
         return info
 
     def render(self):

@@ -81,7 +81,9 @@ class EvaluationResult:
 
 
 def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
-    """The native vector environment of a chunk, recording every sub-environment's history."""
+    """The native vector environment of a chunk, recording every sub-environment's history,
+    with the full per-step info (policies read ``time`` and ``rotor_speed`` from it)."""
+    env_kwargs.setdefault("info_level", "full")
     return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         scene=scene, preset=preset, record_history=True, **env_kwargs)
 

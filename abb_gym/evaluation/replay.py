@@ -34,7 +34,8 @@ def _nominal_env(env: Any):
                                                   setup.config.randomize.__dataclass_fields__})
     return gym.make_vec(env.spec.id if env.spec else _env_id(setup), num_envs=1,
                         vectorization_mode="vector_entry_point", scene=setup.scene,
-                        preset=config, observe_balls=setup.observe_balls)
+                        preset=config, observe_balls=setup.observe_balls,
+                        info_level=getattr(env.unwrapped, "info_level", "full"))
 
 
 def _env_id(setup) -> str:

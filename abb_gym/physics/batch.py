@@ -1,36 +1,47 @@
-"""Batched fixed-step integration: many independent balancers over the same output interval.
+"""Batched fixed-step integration: many independent balancers in blocks of lanes.
 
-The environments and parameter sweeps advance many copies of the model at once.  This module
-gives them the fixed-step methods of :func:`abb_gym.physics.integrators.run` (RK4 and ETDRK4)
-in a form that works one output interval at a time and over a batch:
+The environments, parameter sweeps and batch simulations advance many copies of the model at
+once.  They do it in *blocks*: up to 64 environments side by side as the lanes of
+structure-of-arrays blocks (every array carries the lane last), so that the compiled
+right-hand side (:func:`abb_gym.physics.model.accelerations_block`) works on all lanes of a
+block with vector instructions.  A single environment or a single simulation is a block of one
+lane: the same code.
 
-* :func:`advance` - one environment over one output interval ``[t0, t1]``, with the same
-  segment and step splitting (``integrators.enter_segment`` / ``next_piece``), the same step
-  functions (``integrators._rk4_step`` / ``_etdrk4_step`` over
-  :func:`abb_gym.physics.model.state_derivative`), the same pinning of a prescribed rotor
-  angle at piece ends, and the same non-finite check after every step as ``integrators.run``.
-  For the same output times the states are therefore bit-identical to ``run``
-  (``tests/test_envs_batch.py`` checks this).  It also accumulates the time integral and the
-  maximum of the whirl radius over the substeps.
+* :func:`advance_block` advances every lane of one block over its own interval
+  ``[t0, t1]`` with the fixed-step methods of :func:`abb_gym.physics.integrators.run` (RK4,
+  ETDRK4).  Each lane follows its own schedule - the same segment and step splitting as
+  ``integrators.run`` (``enter_segment`` / ``next_piece``), the same pinning of a prescribed
+  rotor angle at piece ends, the same non-finite check after every step, with its own step
+  size - and the lanes step together, a lane that has finished (or failed) being masked out
+  of the update.  For the same output times each lane's states are therefore bit-identical to
+  ``integrators.run`` (``tests/test_envs_batch.py`` checks this).  It also accumulates the
+  time integral and the maximum of the whirl radius over the substeps.
 * :func:`run_batch` - ``integrators.run`` for ``N`` environments (own parameters, own drive
-  tables, shared output times), parallel over environments with ``numba.prange``.
+  tables, shared output times), parallel over blocks with ``numba.prange``.
 
-Array layout (``N`` environments, ``n`` balls, state length ``ns = 2 (3 + n)``):
+Lanes of a block run until the block's slowest lane is done, so a block works as long as its
+largest step count: callers that mix step sizes group lanes of similar step size into the
+same block (``order``, below; :func:`lane_order`).
 
-==========  =====================  ===========================================================
-name        shape                  meaning
-==========  =====================  ===========================================================
-s           (N, ns)                states, updated in place
-p           (N, N_PARAMS)          scalar parameters (:func:`model.pack_parameters`)
-b           (N, n, N_BALL_PARAMS)  per-ball parameters
-seg_d       (N, R, N_DRIVE)        drive rows; row ``j`` starts at ``seg_d[., j, D_T0]``
-nseg        (N,)                   number of valid rows per environment (<= R)
-ws          (N, 7, ns)             scratch: RK4 stages k1..k4, stage state, accelerations,
-                                   and a free row (``WS_BACKUP``) for the caller
-work        (N, n, WORK_COLUMNS)   scratch of :func:`model.accelerations`
-==========  =====================  ===========================================================
+Arrays of one block (``n`` balls, ``ns = 2 (3 + n)`` state rows, ``L`` lanes):
 
-Workspaces are passed in (never allocated per step) so that the batch loop does no allocation.
+==========  =========================  ======================================================
+name        shape                      meaning
+==========  =========================  ======================================================
+s           (ns, L)                    states
+p           (N_PARAMS, L)              scalar parameters (:func:`model.pack_parameters`)
+b           (n, N_BALL_PARAMS, L)      per-ball parameters
+d           (N_DRIVE, L)               each lane's current drive row
+k, tmp      (7, ns, L), (ns, L)        stages and stage state of the step functions
+lam, coef   (ns, L), (6, ns, L)        ETDRK4 drag rates and weights
+work        (n, WORK_COLUMNS, L)       scratch of the right-hand side
+f           (N_F, L) float             per-lane schedule (``F_*``) and whirl (``W_*``)
+g           (N_G, L) int64             per-lane schedule, status and row (``G_*``)
+act         (L,) uint8                 lanes that take the current step
+==========  =========================  ======================================================
+
+:class:`Blocks` holds these for many blocks (a leading block axis); the drive tables stay per
+environment, ``seg_d`` (N, R, N_DRIVE), and a lane reads the table of its row ``g[G_ROW]``.
 
 Compiled-cache hygiene (numba does not notice edits of called functions in other files) is
 handled once for the whole package by :mod:`abb_gym._jit_cache` on import.
@@ -42,122 +53,282 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from . import integrators as integ
 from . import drive_law as dl
+from . import integrators as integ
 from . import model as mdl
+from .specialise import Specialised, resolve_kernel
 
-__all__ = ["advance", "run_batch", "make_workspace", "WS_ROWS",
-           "WS_BACKUP"]
+__all__ = ["advance_block", "run_batch", "Blocks", "lanes_per_block", "lane_order"]
 
-# rows of the per-environment scratch ``ws``: stages k1..k5 (ETDRK4 uses five), the stage
-# state, the accelerations, the frozen drag rates, the six ETDRK4 weights, and a free row
-WS_STAGES = 0
-WS_TMP = 5
-WS_QDD = 6
-WS_LAM = 7
-WS_COEF = 8
-WS_BACKUP = 14  # row of ``ws`` that callers may use to keep the state at the interval start
-WS_ROWS = 15
+# f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators
+(F_T0, F_T1, F_HMAX, F_TP, F_PE, F_H, F_TC, F_TT, F_TFAIL, W_INT, W_MAX, W_XS, W_YS,
+ W_DMAX) = range(14)
+N_F = 14
+# g rows: taking part, still running, segment, segment count, steps left in the piece, step
+# index in the piece, status, first non-finite state entry, steps taken, environment row
+(G_ON, G_RUN, G_J, G_NSEG, G_LEFT, G_IX, G_STATUS, G_BAD, G_STEPS, G_ROW) = range(10)
+N_G = 10
+MAX_LANES = 64
 
 
-def make_workspace(n_envs: int, n_balls: int) -> tuple[np.ndarray, np.ndarray]:
-    """Scratch arrays ``(ws, work)`` for ``n_envs`` environments of ``n_balls`` balls."""
-    ns = 2 * (3 + n_balls)
-    return np.zeros((n_envs, WS_ROWS, ns)), np.zeros((n_envs, n_balls, mdl.WORK_COLUMNS))
+def lanes_per_block(n_envs: int, cores: int = 2) -> int:
+    """Lanes per block for ``n_envs`` environments: a power of two up to 64, small enough
+    that there are at least ``cores`` blocks to run in parallel (1 for a single environment)."""
+    lanes = 1
+    while lanes * 2 <= MAX_LANES and lanes * 2 * cores <= n_envs:
+        lanes *= 2
+    return lanes
+
+
+def lane_order(step_sizes: np.ndarray) -> np.ndarray:
+    """Rows in the order of their step size (stable), so that environments that take as many
+    steps per interval share blocks and no block waits for one slow lane."""
+    return np.argsort(np.asarray(step_sizes), kind="stable").astype(np.int64)
+
+
+class Blocks:
+    """Preallocated block arrays (module docstring) for ``n_envs`` environments of
+    ``n_balls`` balls, ``lanes`` per block (default :func:`lanes_per_block`); ``int_rows``
+    (>= ``N_G``) rows of ``g``, the ones past ``N_G`` free for the caller."""
+
+    def __init__(self, n_envs: int, n_balls: int, lanes: int | None = None, int_rows: int = 0):
+        lanes = lanes_per_block(n_envs) if lanes is None else int(lanes)
+        nblk = -(-n_envs // lanes)
+        ns = 2 * (3 + n_balls)
+        self.lanes = lanes
+        self.s = np.zeros((nblk, ns, lanes))
+        self.p = np.zeros((nblk, mdl.N_PARAMS, lanes))
+        self.b = np.zeros((nblk, n_balls, mdl.N_BALL_PARAMS, lanes))
+        self.d = np.zeros((nblk, dl.N_DRIVE, lanes))
+        self.k = np.zeros((nblk, 7, ns, lanes))
+        self.tmp = np.zeros((nblk, ns, lanes))
+        self.lam = np.zeros((nblk, ns, lanes))
+        self.coef = np.zeros((nblk, 6, ns, lanes))
+        self.work = np.zeros((nblk, n_balls, mdl.WORK_COLUMNS, lanes))
+        self.f = np.zeros((nblk, N_F, lanes))
+        self.g = np.zeros((nblk, max(N_G, int_rows), lanes), dtype=np.int64)
+        self.act = np.zeros((nblk, lanes), dtype=np.uint8)
+
+    def arrays(self) -> tuple:
+        """``(s, p, b, d, k, tmp, lam, coef, work, f, g, act)``, each with the block axis first."""
+        return (self.s, self.p, self.b, self.d, self.k, self.tmp, self.lam, self.coef,
+                self.work, self.f, self.g, self.act)
+
+
+@njit(cache=True, inline="always")
+def load_lane(s_rows, p_rows, b_rows, row, s, p, b, lane):
+    """Copy environment ``row``'s state and parameters (row-major arrays) into ``lane`` of a
+    block (lane-last arrays)."""
+    for c in range(s.shape[0]):
+        s[c, lane] = s_rows[row, c]
+    for c in range(p.shape[0]):
+        p[c, lane] = p_rows[row, c]
+    for i in range(b.shape[0]):
+        for c in range(b.shape[1]):
+            b[i, c, lane] = b_rows[row, i, c]
 
 
 @njit(cache=True)
-def advance(s, t0, t1, seg_d, nseg, j, p, b, dt_max, ws, work, whirl, method):
-    """Advance one state ``s`` (in place) from ``t0`` to ``t1`` with a fixed-step method,
-    ``integrators.METHOD_RK4`` or ``integrators.METHOD_ETDRK4`` (the same step functions as
-    :func:`integrators.run`, so the results agree bit for bit).
+def _first_nonfinite_lane(s, lane):
+    for j in range(s.shape[0]):
+        if not math.isfinite(s[j, lane]):
+            return j
+    return -1
 
-    ``seg_d`` holds ``nseg`` drive rows, ``j`` is the index of the current row (as returned by
-    the previous call), ``ws`` a (WS_ROWS, ns) and ``work`` an (n, WORK_COLUMNS) scratch array.
-    ``whirl`` (length 5) accumulates over the substeps (right-endpoint rule): ``whirl[0]`` +=
-    the integral of the deflection from the rest position ``(whirl[2], whirl[3])`` (the static
-    sag under gravity, else 0), ``whirl[4]`` = max(whirl[4], that deflection), ``whirl[1]`` =
-    max(whirl[1], largest whirl radius
-    sqrt(x^2 + y^2) measured from the bearing axis).
 
-    Returns ``(status, j, failure time, index of the first non-finite entry, steps)``; status 0
-    is ok, 1 (``integrators.STATUS_NONFINITE``) means the state became non-finite; ``s`` then
-    holds the non-finite state (restore it from a copy if needed).
+@njit(cache=True, error_model="numpy")
+def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method, nb, spec):
+    """Advance every lane ``l`` of one block with ``g[G_ON, l]`` set from ``f[F_T0, l]`` to
+    ``f[F_T1, l]`` with steps of at most ``f[F_HMAX, l]``, by ``method``
+    (``integrators.METHOD_RK4`` or ``METHOD_ETDRK4``), in place.
+
+    Inputs per lane besides the block arrays: ``g[G_ROW]`` (its drive table
+    ``seg_d[g[G_ROW]]``), ``g[G_NSEG]`` (valid rows of that table), ``g[G_J]`` (current row,
+    updated), ``f[W_XS]``, ``f[W_YS]`` (the rest position of the whirl).  Outputs:
+    ``g[G_STATUS]`` (0, or ``integrators.STATUS_NONFINITE``: the lane then holds the non-finite
+    state, at time ``f[F_TFAIL]``, first bad entry ``g[G_BAD]``), ``g[G_STEPS]``, and over the
+    substeps (right-endpoint rule) ``f[W_INT]`` the time integral of the deflection from the
+    rest position, ``f[W_DMAX]`` its maximum, ``f[W_MAX]`` the largest whirl radius
+    ``sqrt(x^2 + y^2)`` from the bearing axis.
     """
-    n = s.shape[0]
-    nq = n // 2
-    stages = ws[WS_STAGES:WS_STAGES + 5]
-    tmp = ws[WS_TMP]
-    qdd = ws[WS_QDD, :nq]
-    lam = ws[WS_LAM]
-    coef = ws[WS_COEF:WS_COEF + 6]
-    steps = 0
-    t = t0
-    while t < t1:
-        j = integ.enter_segment(t, s, seg_d, nseg, j, nq)
-        piece_end, m, h = integ.next_piece(t, t1, seg_d, nseg, j, dt_max)
-        for i in range(m):
-            ti = t + i * h
-            if method == integ.METHOD_ETDRK4:
-                integ._etdrk4_step(ti, h, s, p, b, seg_d[j], stages, tmp, qdd, work, lam, coef)
-            else:
-                integ._rk4_step(ti, h, s, p, b, seg_d[j], stages, tmp, qdd, work)
-            steps += 1
-            bad = integ._first_nonfinite(s)
+    L = s.shape[1]
+    nq = 3 + nb
+    for l in range(L):
+        g[G_RUN, l] = g[G_ON, l]
+        g[G_LEFT, l] = 0
+        g[G_IX, l] = -1
+        g[G_STEPS, l] = 0
+        g[G_STATUS, l] = integ.STATUS_OK
+        g[G_BAD, l] = -1
+        f[F_TP, l] = f[F_T0, l]
+        f[F_TFAIL, l] = f[F_T1, l]
+        f[W_INT, l] = 0.0
+        f[W_MAX, l] = 0.0
+        f[W_DMAX, l] = 0.0
+    h = f[F_H]
+    tc = f[F_TC]
+    tt = f[F_TT]
+    while True:
+        running = False
+        for l in range(L):
+            act[l] = 0
+            if g[G_RUN, l] == 0:
+                continue
+            table = seg_d[g[G_ROW, l]]
+            if g[G_LEFT, l] == 0:
+                if g[G_IX, l] >= 0:
+                    # a piece is done: its end is the next piece's start
+                    f[F_TP, l] = f[F_PE, l]
+                    dl.pin_prescribed(f[F_TP, l], s, l, table[g[G_J, l]], nq)
+                t = f[F_TP, l]
+                if t >= f[F_T1, l]:
+                    g[G_RUN, l] = 0
+                    continue
+                nseg = g[G_NSEG, l]
+                j = integ.enter_segment(t, s, l, table, nseg, g[G_J, l], nq)
+                piece_end, m, hh = integ.next_piece(t, f[F_T1, l], table, nseg, j, f[F_HMAX, l])
+                g[G_J, l] = j
+                g[G_LEFT, l] = m
+                g[G_IX, l] = 0
+                f[F_PE, l] = piece_end
+                h[l] = hh
+                for c in range(dl.N_DRIVE):
+                    d[c, l] = table[j, c]
+            tc[l] = f[F_TP, l] + g[G_IX, l] * h[l]
+            act[l] = 1
+            running = True
+        if not running:
+            break
+        if method == integ.METHOD_ETDRK4:
+            integ._etdrk4_step(tc, h, s, p, b, d, k, tmp, tt, work, lam, coef, act, nb, spec)
+        else:
+            integ._rk4_step(tc, h, s, p, b, d, k, tmp, tt, work, act, nb, spec)
+        for l in range(L):
+            if act[l] == 0:
+                continue
+            g[G_STEPS, l] += 1
+            g[G_IX, l] += 1
+            g[G_LEFT, l] -= 1
+            bad = _first_nonfinite_lane(s, l)
             if bad >= 0:
-                return integ.STATUS_NONFINITE, j, ti + h, bad, steps
-            dx = s[0] - whirl[2]
-            dy = s[1] - whirl[3]
+                g[G_STATUS, l] = integ.STATUS_NONFINITE
+                g[G_BAD, l] = bad
+                g[G_RUN, l] = 0
+                f[F_TFAIL, l] = tc[l] + h[l]
+                continue
+            x = s[0, l]
+            y = s[1, l]
+            dx = x - f[W_XS, l]
+            dy = y - f[W_YS, l]
             rd = math.sqrt(dx * dx + dy * dy)
-            whirl[0] += rd * h
-            if rd > whirl[4]:
-                whirl[4] = rd
-            r = math.sqrt(s[0] * s[0] + s[1] * s[1])
-            if r > whirl[1]:
-                whirl[1] = r
-        t = piece_end
-        dl.pin_prescribed(t, s, seg_d[j], nq)
-    return integ.STATUS_OK, j, t1, -1, steps
+            f[W_INT, l] += rd * h[l]
+            if rd > f[W_DMAX, l]:
+                f[W_DMAX, l] = rd
+            r = math.sqrt(x * x + y * y)
+            if r > f[W_MAX, l]:
+                f[W_MAX, l] = r
 
 
-@njit(cache=True, parallel=True)
-def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, ws, work,
-              method=integ.METHOD_RK4):
-    """:func:`integrators.run` (RK4 or ETDRK4) for ``N`` environments in parallel.
+@njit(cache=True, parallel=True, error_model="numpy")
+def _run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, order, lanes, method, nb,
+               spec):
+    n_env = order.shape[0]
+    ns = s0.shape[1]
+    nq = ns // 2
+    nblk = (n_env + lanes - 1) // lanes
+    for q in prange(nblk):
+        s = np.zeros((ns, lanes))
+        pb = np.zeros((p.shape[1], lanes))
+        bb = np.zeros((nb, b.shape[2], lanes))
+        d = np.zeros((dl.N_DRIVE, lanes))
+        k = np.zeros((7, ns, lanes))
+        tmp = np.zeros((ns, lanes))
+        lam = np.zeros((ns, lanes))
+        coef = np.zeros((6, ns, lanes))
+        work = np.zeros((nb, mdl.WORK_COLUMNS, lanes))
+        f = np.zeros((N_F, lanes))
+        g = np.zeros((N_G, lanes), dtype=np.int64)
+        act = np.zeros(lanes, dtype=np.uint8)
+        for l in range(lanes):
+            r = q * lanes + l
+            if r >= n_env:
+                continue
+            e = order[r]
+            g[G_ON, l] = 1
+            g[G_ROW, l] = e
+            g[G_NSEG, l] = nseg[e]
+            f[F_HMAX, l] = dt_max[e]
+            load_lane(s0, p, b, e, s, pb, bb, l)
+            j = 0
+            while j + 1 < nseg[e] and seg_d[e, j + 1, dl.D_T0] <= t_out[0]:
+                j += 1
+            g[G_J, l] = j
+            dl.pin_prescribed(t_out[0], s, l, seg_d[e, j], nq)
+            for c in range(ns):
+                out[e, 0, c] = s[c, l]
+            status[e, 0] = integ.STATUS_OK
+            status[e, 1] = t_out[-1]
+            status[e, 2] = -1
+            status[e, 3] = 0
+        for kk in range(t_out.shape[0] - 1):
+            for l in range(lanes):
+                f[F_T0, l] = t_out[kk]
+                f[F_T1, l] = t_out[kk + 1]
+            advance_block(s, pb, bb, d, k, tmp, lam, coef, work, f, g, act, seg_d, method, nb,
+                          spec)
+            for l in range(lanes):
+                if g[G_ON, l] == 0:
+                    continue
+                e = g[G_ROW, l]
+                status[e, 3] += g[G_STEPS, l]
+                if g[G_STATUS, l] != integ.STATUS_OK:
+                    status[e, 0] = g[G_STATUS, l]
+                    status[e, 1] = f[F_TFAIL, l]
+                    status[e, 2] = g[G_BAD, l]
+                    g[G_ON, l] = 0
+                    continue
+                for c in range(ns):
+                    out[e, kk + 1, c] = s[c, l]
 
-    ``s0`` (N, ns) initial states, ``t_out`` (T,) shared output times, ``seg_d``/``nseg`` the
-    drive tables, ``p``/``b`` the parameters, ``out`` (N, T, ns) receives the states.
-    ``status`` (N, 4) float receives (status, failure time, failing index, steps) per
-    environment, as ``rk4_run`` returns them.  Workspaces from :func:`make_workspace`.
+
+_run_batch_specialised = Specialised(_run_batch, literal=(11, 12, 13),
+                                     names=("method", "balls", "effects"))
+
+
+def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.METHOD_RK4,
+              order=None, lanes=None, kernel=None):
+    """:func:`integrators.run` (RK4 or ETDRK4) for ``N`` environments, in parallel blocks.
+
+    ``s0`` (N, ns) initial states, ``t_out`` (T,) shared output times, ``seg_d`` (N, R,
+    N_DRIVE) / ``nseg`` (N,) the drive tables (every table of the same mode), ``p``/``b`` the
+    parameters, ``dt_max`` (N,) the step limits [s]; ``out`` (N, T, ns) receives the states
+    and ``status`` (N, 4) float (status, failure time, failing index, steps) per environment,
+    as ``integrators.run`` returns them.  ``order`` (default :func:`lane_order` of ``dt_max``)
+    assigns environments to lanes; ``lanes`` per block defaults to :func:`lanes_per_block`.
+    Environments are run in two groups, prescribed rotor and motor drive; ``kernel``
+    (:func:`~abb_gym.physics.specialise.resolve_kernel`: "auto", "generic" or "vectorised")
+    says whether a group runs the general kernel or one specialised on the union of its
+    environments' effects (an effect a lane does not have contributes exactly zero there).
+    Both give the same result bit for bit.
     """
     n_env = s0.shape[0]
-    nq = s0.shape[1] // 2
-    for e in prange(n_env):
-        s = ws[e, WS_BACKUP]
-        s[:] = s0[e]
-        whirl = np.zeros(5)
-        j = 0
-        ns_e = nseg[e]
-        while j + 1 < ns_e and seg_d[e, j + 1, dl.D_T0] <= t_out[0]:
-            j += 1
-        dl.pin_prescribed(t_out[0], s, seg_d[e, j], nq)
-        out[e, 0, :] = s
-        total = 0
-        st = integ.STATUS_OK
-        t_fail = t_out[-1]
-        bad = -1
-        for k in range(t_out.shape[0] - 1):
-            st, j, t_fail, bad, steps = advance(s, t_out[k], t_out[k + 1], seg_d[e], ns_e, j,
-                                                p[e], b[e], dt_max, ws[e], work[e], whirl,
-                                                method)
-            total += steps
-            if st != integ.STATUS_OK:
-                break
-            out[e, k + 1, :] = s
-        status[e, 0] = st
-        status[e, 1] = t_fail
-        status[e, 2] = bad
-        status[e, 3] = total
-
-
-
+    nb = b.shape[1]
+    dt_max = np.broadcast_to(np.asarray(dt_max, float), (n_env,)).copy()
+    order = lane_order(dt_max) if order is None else np.asarray(order, np.int64)
+    lanes = lanes_per_block(n_env) if lanes is None else int(lanes)
+    nseg = np.asarray(nseg, np.int64)
+    seg_d = np.ascontiguousarray(seg_d, float)
+    args = (np.ascontiguousarray(s0, float), np.asarray(t_out, float), seg_d, nseg,
+            np.ascontiguousarray(p, float), np.ascontiguousarray(b, float), dt_max, out, status)
+    # the rotor spin is prescribed or a degree of freedom: one compiled kernel per mode
+    motor = seg_d[:, 0, dl.D_MODE] == dl.MODE_MOTOR
+    for group in (order[~motor[order]], order[motor[order]]):
+        if group.size == 0:
+            continue
+        group_lanes = min(lanes, lanes_per_block(group.size))
+        spec = 0
+        for e in group:
+            spec |= mdl.spec_of(p[e], seg_d[e, :max(int(nseg[e]), 1)])
+        call = (_run_batch_specialised if resolve_kernel(kernel, group_lanes) == "vectorised"
+                else _run_batch_specialised.generic)
+        call(*args, group, group_lanes, int(method), nb, spec)

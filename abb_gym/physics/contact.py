@@ -25,7 +25,7 @@ smoother force build-up and larger steps at a negligible geometric error.  The p
 collision at relative speed v is about v / omega_c with ``omega_c = sqrt(k / m_ij)``, so pick k
 for an acceptable overlap at the fastest relative speeds of the scene; omega_c then bounds the
 step of every explicit method (RK4, ETDRK4: h omega_c < ~2.8), and
-:func:`abb_gym.physics.model.drag_rates` reports it so that the RK4 step rule keeps to it.
+:func:`abb_gym.physics.model.drag_rates_block` reports it so that the RK4 step rule keeps to it.
 
 **When it matters.**  With three or more balls (or two that start close together) the balls
 meet whenever they clump: during the run-up, when they lag the rotor together, and in the final
@@ -61,29 +61,32 @@ def pair_geometry(phi_i, phi_j, big_r, reach):
 
 
 @njit(cache=True)
-def ball_contacts(s, nq, b, col_r, col_m, big_r, k, zeta, out, col_q, col_n):
-    """Generalised contact forces on the ball angles into ``out[:, col_q]`` [N m] and the
-    outward radial contact force on each ball into ``out[:, col_n]`` [N].
+def ball_contacts_lane(s, l, nq, b, col_r, col_m, big_r, k, zeta, out, col_q, col_n):
+    """Generalised contact forces on the ball angles of lane ``l`` into ``out[:, col_q, l]``
+    [N m] and the outward radial contact force on each ball into ``out[:, col_n, l]`` [N].
 
-    ``b[i, col_r]`` ball radii [m], ``b[i, col_m]`` effective masses along the track [kg]."""
+    ``s`` (state, lanes), ``b[i, col_r, l]`` ball radii [m], ``b[i, col_m, l]`` effective
+    masses along the track [kg] (the lane layout of :func:`abb_gym.physics.model.
+    accelerations_block`)."""
     n = b.shape[0]
     for i in range(n):
-        out[i, col_q] = 0.0
-        out[i, col_n] = 0.0
+        out[i, col_q, l] = 0.0
+        out[i, col_n, l] = 0.0
     for i in range(n - 1):
         for j in range(i + 1, n):
-            pen, dchord, sh = pair_geometry(s[3 + i], s[3 + j], big_r, b[i, col_r] + b[j, col_r])
+            pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
+                                            b[i, col_r, l] + b[j, col_r, l])
             if pen > 0.0:
-                rate = -dchord * (s[nq + 3 + j] - s[nq + 3 + i])
-                mi = b[i, col_m]
-                mj = b[j, col_m]
+                rate = -dchord * (s[nq + 3 + j, l] - s[nq + 3 + i, l])
+                mi = b[i, col_m, l]
+                mj = b[j, col_m, l]
                 force = k * pen + 2.0 * zeta * math.sqrt(k * mi * mj / (mi + mj)) * rate
                 if force > 0.0:
                     q = force * dchord
-                    out[j, col_q] += q
-                    out[i, col_q] -= q
-                    out[i, col_n] += force * sh
-                    out[j, col_n] += force * sh
+                    out[j, col_q, l] += q
+                    out[i, col_q, l] -= q
+                    out[i, col_n, l] += force * sh
+                    out[j, col_n, l] += force * sh
 
 
 @njit(cache=True)
@@ -100,8 +103,9 @@ def contact_energy(q, b, col_r, big_r, k):
 
 
 @njit(cache=True)
-def contact_rate(s, i, b, col_r, col_m, big_r, k, zeta):
-    """Bound on the contact eigenvalue magnitude of ball i [1/s] (0 if it touches nothing).
+def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
+    """Bound on the contact eigenvalue magnitude of ball i of lane ``l`` [1/s] (0 if it
+    touches nothing).
 
     Gershgorin over the touching neighbours, omega^2 = sum_j k (1/m_i + 1/m_j), counting the
     two largest terms only: in a ring a ball has one neighbour on each side, and the state at
@@ -112,9 +116,10 @@ def contact_rate(s, i, b, col_r, col_m, big_r, k, zeta):
     second = 0.0
     for j in range(b.shape[0]):
         if j != i:
-            pen, dchord, sh = pair_geometry(s[3 + i], s[3 + j], big_r, b[i, col_r] + b[j, col_r])
+            pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
+                                            b[i, col_r, l] + b[j, col_r, l])
             if pen > 0.0:
-                w2 = k * (1.0 / b[i, col_m] + 1.0 / b[j, col_m])
+                w2 = k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
                 if w2 > first:
                     second = first
                     first = w2

@@ -52,11 +52,17 @@ MODE_MOTOR = 1.0
 
 
 @njit(cache=True, inline="always")
+def prescribed_law(tau, th0, w0, alpha):
+    """(angle [rad], speed [rad/s], acceleration [rad/s^2]) a time ``tau`` [s] into a
+    prescribed row that starts at angle ``th0``, speed ``w0`` with acceleration ``alpha``
+    (scalars only: the vector kernels call it inside their lane loops)."""
+    return th0 + w0 * tau + 0.5 * alpha * tau * tau, w0 + alpha * tau, alpha
+
+
+@njit(cache=True, inline="always")
 def prescribed_state(t, d):
     """(angle [rad], speed [rad/s], acceleration [rad/s^2]) of prescribed row ``d`` at ``t``."""
-    tau = t - d[D_T0]
-    alpha = d[D_ALPHA]
-    return d[D_TH0] + d[D_W0] * tau + 0.5 * alpha * tau * tau, d[D_W0] + alpha * tau, alpha
+    return prescribed_law(t - d[D_T0], d[D_TH0], d[D_W0], d[D_ALPHA])
 
 
 @njit(cache=True, inline="always")
@@ -78,15 +84,21 @@ def motor_torque(t, w, d, envelope):
     envelope of :func:`available_torque`; without it the torque is clipped to ``D_TLIM``.
     Leaving it out of the plain kernel keeps that kernel's code small enough for LLVM to
     inline it whole (a branch here cost ~10 % of a right-hand side)."""
-    torque = d[D_TORQUE] + d[D_GAIN] * (d[D_TW0] + d[D_TALPHA] * (t - d[D_T0]) - w)
-    lim = d[D_TLIM]
+    return motor_law(t - d[D_T0], w, d[D_TORQUE], d[D_GAIN], d[D_TW0], d[D_TALPHA], d[D_TLIM],
+                     d[D_WNL], d[D_PLIM], envelope)
+
+
+@njit(cache=True, inline="always")
+def motor_law(tau, w, command, gain, w_target0, target_accel, limit, no_load_speed, power,
+              envelope):
+    """Motor torque [N m] a time ``tau`` [s] into a motor row, at rotor speed ``w``:
+    ``clip(command + gain (w_target0 + target_accel tau - w), -T_max, T_max)`` (scalars only,
+    for the lane loops; :func:`motor_torque` reads them from a row)."""
+    torque = command + gain * (w_target0 + target_accel * tau - w)
+    lim = limit
     if envelope:
-        lim = available_torque(lim, w, d[D_WNL], d[D_PLIM])
-    if torque > lim:
-        torque = lim
-    elif torque < -lim:
-        torque = -lim
-    return torque
+        lim = available_torque(lim, w, no_load_speed, power)
+    return lim if torque > lim else (-lim if torque < -lim else torque)
 
 
 @njit(cache=True, inline="always")
@@ -95,25 +107,15 @@ def needs_envelope(d):
     return d[D_WNL] != 0.0 or d[D_PLIM] != 0.0
 
 
-@njit(cache=True, inline="always")
-def drive_state(t, s, d, nq, envelope):
-    """(rotor angle, rotor speed, prescribed acceleration or NaN, motor torque) at time ``t``
-    for state ``s`` (``nq`` generalised coordinates) under row ``d``."""
-    if d[D_MODE] == MODE_PRESCRIBED:
-        th, w, alpha = prescribed_state(t, d)
-        return th, w, alpha, 0.0
-    w = s[nq + 2]
-    return s[2], w, np.nan, motor_torque(t, w, d, envelope)
-
-
 @njit(cache=True)
-def pin_prescribed(t, s, d, nq):
-    """Set the rotor angle and speed of state ``s`` to the exact prescribed law at ``t`` (no
-    drift of a prescribed rotor angle over many steps)."""
+def pin_prescribed(t, s, lane, d, nq):
+    """Set the rotor angle and speed of lane ``lane`` of state block ``s`` (state rows x
+    lanes; a single state is a block of one lane) to the exact prescribed law of row ``d`` at
+    ``t``: no drift of a prescribed rotor angle over many steps."""
     if d[D_MODE] == MODE_PRESCRIBED:
         th, w, _ = prescribed_state(t, d)
-        s[2] = th
-        s[nq + 2] = w
+        s[2, lane] = th
+        s[nq + 2, lane] = w
 
 
 @njit(cache=True, inline="always")

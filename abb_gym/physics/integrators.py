@@ -1,5 +1,5 @@
 """Integrators behind one interface, all over one right-hand side
-(:func:`abb_gym.physics.model.state_derivative`).
+(:func:`abb_gym.physics.model.accelerations_block`).
 
 Compiled (numba), chosen by :data:`METHOD_IDS` and run by :func:`run`:
 
@@ -34,10 +34,10 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.integrate import solve_ivp
-
 from . import drive_law as dl
+from . import elementary as el
 from . import model as mdl
+from .specialise import Specialised
 
 STATUS_OK = 0
 STATUS_NONFINITE = 1
@@ -55,12 +55,13 @@ ADAPTIVE = ("dopri5",)
 
 # --------------------------------------------------------------------------- helpers
 @njit(cache=True)
-def enter_segment(t, s, seg_d, nseg, j, nq):
+def enter_segment(t, s, lane, seg_d, nseg, j, nq):
     """Index of the drive segment that holds ``t``, moving on from segment ``j``; at every
-    segment start passed, the prescribed rotor state is pinned to the exact drive law."""
+    segment start passed, the prescribed rotor state of lane ``lane`` of state block ``s`` is
+    pinned to the exact drive law."""
     while j + 1 < nseg and seg_d[j + 1, dl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
         j += 1
-        dl.pin_prescribed(t, s, seg_d[j], nq)
+        dl.pin_prescribed(t, s, lane, seg_d[j], nq)
     return j
 
 
@@ -85,22 +86,36 @@ def _first_nonfinite(s):
     return -1
 
 
-@njit(cache=True)
-def _rk4_step(t, h, s, p, b, d, k, tmp, qdd, work):
+@njit(cache=True, error_model="numpy")
+def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
+    """One classical RK4 step of every lane of a block (arrays lane-last, see
+    :func:`abb_gym.physics.model.accelerations_block`): lane ``l`` from ``t[l]`` by ``h[l]``;
+    lanes with ``active[l] == 0`` are computed but keep their state (a masked update, so that
+    the lane loops stay branch-free)."""
     n = s.shape[0]
+    L = s.shape[1]
     k1, k2, k3, k4 = k[0], k[1], k[2], k[3]
-    mdl.state_derivative(t, s, p, b, d, k1, qdd, work)
+    mdl.accelerations_block(t, s, p, b, d, k1, work, nb, spec)
     for j in range(n):
-        tmp[j] = s[j] + 0.5 * h * k1[j]
-    mdl.state_derivative(t + 0.5 * h, tmp, p, b, d, k2, qdd, work)
+        for l in range(L):
+            tmp[j, l] = s[j, l] + 0.5 * h[l] * k1[j, l]
+    for l in range(L):
+        tt[l] = t[l] + 0.5 * h[l]
+    mdl.accelerations_block(tt, tmp, p, b, d, k2, work, nb, spec)
     for j in range(n):
-        tmp[j] = s[j] + 0.5 * h * k2[j]
-    mdl.state_derivative(t + 0.5 * h, tmp, p, b, d, k3, qdd, work)
+        for l in range(L):
+            tmp[j, l] = s[j, l] + 0.5 * h[l] * k2[j, l]
+    mdl.accelerations_block(tt, tmp, p, b, d, k3, work, nb, spec)
     for j in range(n):
-        tmp[j] = s[j] + h * k3[j]
-    mdl.state_derivative(t + h, tmp, p, b, d, k4, qdd, work)
+        for l in range(L):
+            tmp[j, l] = s[j, l] + h[l] * k3[j, l]
+    for l in range(L):
+        tt[l] = t[l] + h[l]
+    mdl.accelerations_block(tt, tmp, p, b, d, k4, work, nb, spec)
     for j in range(n):
-        s[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+        for l in range(L):
+            new = s[j, l] + h[l] / 6.0 * (k1[j, l] + 2.0 * k2[j, l] + 2.0 * k3[j, l] + k4[j, l])
+            s[j, l] = new if active[l] != 0 else s[j, l]
 
 
 @njit(cache=True)
@@ -160,7 +175,7 @@ _F3_SERIES = np.array([1 / 6, 0.0, -1 / 120, -1 / 360, -1 / 1680, -1 / 10080, -1
                        -1 / 604800])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _series(c, z):
     acc = 0.0
     for k in range(c.shape[0] - 1, -1, -1):
@@ -168,15 +183,18 @@ def _series(c, z):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def etd_coefficients(z):
-    """ETDRK4 weights for z = h L: (e^(z/2), e^z, Q, f1, f2, f3) (Cox & Matthews 2002).
+    """ETDRK4 weights for z = h L <= 0: (e^(z/2), e^z, Q, f1, f2, f3) (Cox & Matthews 2002).
 
     Q = (e^(z/2) - 1)/z, f1 = (-4 - z + e^z (4 - 3z + z^2))/z^3, f2 = (2 + z + e^z (z - 2))/z^3,
     f3 = (-4 - 3z - z^2 + e^z (4 - z))/z^3; Taylor series for |z| < 0.2, where the closed forms
     lose digits to cancellation (series truncation there < 1e-11).  At z = 0 they are RK4's.
+    The exponential is :func:`abb_gym.physics.elementary.exp_bounded` (vectorises), with z
+    held above -700, where e^z is 0 to double precision anyway.
     """
-    e2 = math.exp(0.5 * z)
+    zc = max(z, -700.0)
+    e2 = el.exp_bounded(0.5 * zc)
     e = e2 * e2
     if abs(z) < 0.2:
         return (e2, e, _series(_Q_SERIES, z), _series(_F1_SERIES, z), _series(_F2_SERIES, z),
@@ -186,59 +204,82 @@ def etd_coefficients(z):
             (2.0 + z + e * (z - 2.0)) / z3, (-4.0 - 3.0 * z - z * z + e * (4.0 - z)) / z3)
 
 
-@njit(cache=True)
-def _etdrk4_step(t, h, s, p, b, d, k, tmp, qdd, work, lam, coef):
-    """Cox-Matthews ETDRK4 for y' = -lam y + N(t, y), N = f + lam y, lam frozen per step.
+@njit(cache=True, error_model="numpy")
+def _etdrk4_step(t, h, s, p, b, d, k, tmp, tt, work, lam, coef, active, nb, spec):
+    """Cox-Matthews ETDRK4 for y' = -lam y + N(t, y), N = f + lam y, lam frozen per step, for
+    every lane of a block (masked like :func:`_rk4_step`).
 
     Exact for the drag relaxation under constant forcing (the quasi-steady balance of drag and
     driving force that a Lawson integrating factor gets badly wrong), fourth order like RK4.
     """
     n = s.shape[0]
-    nu, na, nb, nc = k[0], k[1], k[2], k[3]
+    L = s.shape[1]
+    nu, na, nbb, nc = k[0], k[1], k[2], k[3]
     a = k[4]
-    mdl.drag_rates(t, s, p, b, d, lam)
+    mdl.drag_rates_block(t, s, p, b, d, lam, nb, spec)
     for j in range(n):
-        e2, e, q, f1, f2, f3 = etd_coefficients(-h * lam[j])
-        coef[0, j] = e2
-        coef[1, j] = e
-        coef[2, j] = q
-        coef[3, j] = f1
-        coef[4, j] = f2
-        coef[5, j] = f3
-    mdl.state_derivative(t, s, p, b, d, nu, qdd, work)
+        for l in range(L):
+            e2, e, q, f1, f2, f3 = etd_coefficients(-h[l] * lam[j, l])
+            coef[0, j, l] = e2
+            coef[1, j, l] = e
+            coef[2, j, l] = q
+            coef[3, j, l] = f1
+            coef[4, j, l] = f2
+            coef[5, j, l] = f3
+    mdl.accelerations_block(t, s, p, b, d, nu, work, nb, spec)
     for j in range(n):
-        nu[j] += lam[j] * s[j]
-        a[j] = coef[0, j] * s[j] + h * coef[2, j] * nu[j]
-    mdl.state_derivative(t + 0.5 * h, a, p, b, d, na, qdd, work)
+        for l in range(L):
+            nu[j, l] += lam[j, l] * s[j, l]
+            a[j, l] = coef[0, j, l] * s[j, l] + h[l] * coef[2, j, l] * nu[j, l]
+    for l in range(L):
+        tt[l] = t[l] + 0.5 * h[l]
+    mdl.accelerations_block(tt, a, p, b, d, na, work, nb, spec)
     for j in range(n):
-        na[j] += lam[j] * a[j]
-        tmp[j] = coef[0, j] * s[j] + h * coef[2, j] * na[j]
-    mdl.state_derivative(t + 0.5 * h, tmp, p, b, d, nb, qdd, work)
+        for l in range(L):
+            na[j, l] += lam[j, l] * a[j, l]
+            tmp[j, l] = coef[0, j, l] * s[j, l] + h[l] * coef[2, j, l] * na[j, l]
+    mdl.accelerations_block(tt, tmp, p, b, d, nbb, work, nb, spec)
     for j in range(n):
-        nb[j] += lam[j] * tmp[j]
-        tmp[j] = coef[0, j] * a[j] + h * coef[2, j] * (2.0 * nb[j] - nu[j])
-    mdl.state_derivative(t + h, tmp, p, b, d, nc, qdd, work)
+        for l in range(L):
+            nbb[j, l] += lam[j, l] * tmp[j, l]
+            tmp[j, l] = coef[0, j, l] * a[j, l] + h[l] * coef[2, j, l] * (2.0 * nbb[j, l]
+                                                                          - nu[j, l])
+    for l in range(L):
+        tt[l] = t[l] + h[l]
+    mdl.accelerations_block(tt, tmp, p, b, d, nc, work, nb, spec)
     for j in range(n):
-        nc[j] += lam[j] * tmp[j]
-        s[j] = coef[1, j] * s[j] + h * (coef[3, j] * nu[j] + 2.0 * coef[4, j] * (na[j] + nb[j])
-                                        + coef[5, j] * nc[j])
+        for l in range(L):
+            nc[j, l] += lam[j, l] * tmp[j, l]
+            new = coef[1, j, l] * s[j, l] + h[l] * (
+                coef[3, j, l] * nu[j, l] + 2.0 * coef[4, j, l] * (na[j, l] + nbb[j, l])
+                + coef[5, j, l] * nc[j, l])
+            s[j, l] = new if active[l] != 0 else s[j, l]
+
+
+@njit(cache=True, inline="always")
+def _rhs1(t, s, p2, b3, d, ds, work, tt, nb, spec):
+    """d(state)/dt of a one-lane run with 1-D state ``s`` and drive row ``d`` (``p2``, ``b3``:
+    the parameters with a lane axis of length 1)."""
+    tt[0] = t
+    mdl.accelerations_block(tt, s.reshape((s.shape[0], 1)), p2, b3, d.reshape((d.shape[0], 1)),
+                            ds.reshape((ds.shape[0], 1)), work, nb, spec)
 
 
 ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 
 
-@njit(cache=True)
-def _ros2_step(t, h, s, p, b, d, k, tmp, qdd, work, wmat, piv):
+@njit(cache=True, error_model="numpy")
+def _ros2_step(t, h, s, p2, b3, d, k, tmp, work, tt, wmat, piv, nb, spec):
     n = s.shape[0]
     f0, k1, k2, fp = k[0], k[1], k[2], k[3]
-    mdl.state_derivative(t, s, p, b, d, f0, qdd, work)
+    _rhs1(t, s, p2, b3, d, f0, work, tt, nb, spec)
     # W = I - gamma h J with J by forward differences
     for j in range(n):
         delta = 1.5e-8 * max(abs(s[j]), 1e-5)
         for i in range(n):
             tmp[i] = s[i]
         tmp[j] += delta
-        mdl.state_derivative(t, tmp, p, b, d, fp, qdd, work)
+        _rhs1(t, tmp, p2, b3, d, fp, work, tt, nb, spec)
         for i in range(n):
             wmat[i, j] = -ROS2_GAMMA * h * (fp[i] - f0[i]) / delta
         wmat[j, j] += 1.0
@@ -248,7 +289,7 @@ def _ros2_step(t, h, s, p, b, d, k, tmp, qdd, work, wmat, piv):
     _lu_solve(wmat, piv, k1)
     for i in range(n):
         tmp[i] = s[i] + h * k1[i]
-    mdl.state_derivative(t + h, tmp, p, b, d, k2, qdd, work)
+    _rhs1(t + h, tmp, p2, b3, d, k2, work, tt, nb, spec)
     for i in range(n):
         k2[i] -= 2.0 * k1[i]
     _lu_solve(wmat, piv, k2)
@@ -270,8 +311,8 @@ _A = np.array([
 _E = np.array([71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40])
 
 
-@njit(cache=True)
-def _dopri5_attempt(t, h, s, p, b, d, k, tmp, qdd, work, s_new, rtol, atol):
+@njit(cache=True, error_model="numpy")
+def _dopri5_attempt(t, h, s, p2, b3, d, k, tmp, work, tt, s_new, rtol, atol, nb, spec):
     """One trial step; k[0] must hold f(t, s).  Returns the scaled error norm."""
     n = s.shape[0]
     for stage in range(1, 7):
@@ -280,7 +321,7 @@ def _dopri5_attempt(t, h, s, p, b, d, k, tmp, qdd, work, s_new, rtol, atol):
             for j in range(stage):
                 acc += _A[stage, j] * k[j, i]
             tmp[i] = s[i] + h * acc
-        mdl.state_derivative(t + _C[stage] * h, tmp, p, b, d, k[stage], qdd, work)
+        _rhs1(t + _C[stage] * h, tmp, p2, b3, d, k[stage], work, tt, nb, spec)
     err = 0.0
     for i in range(n):
         s_new[i] = tmp[i]  # stage 7 evaluates at the 5th-order solution (FSAL)
@@ -293,33 +334,42 @@ def _dopri5_attempt(t, h, s, p, b, d, k, tmp, qdd, work, s_new, rtol, atol):
 
 
 # --------------------------------------------------------------------------- driver
-@njit(cache=True)
-def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
+@njit(cache=True, error_model="numpy")
+def _run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec):
     """Integrate from ``t_out[0]``; write the state at each ``t_out[k]`` into ``out[k]``.
 
     ``method`` is a value of :data:`METHOD_IDS`; ``h`` the fixed step (or the first trial step
     of the adaptive method) [s]; ``rtol`` and ``atol`` (array) are used by the adaptive
     method only.  ``seg_t`` are segment start times (ascending, ``seg_t[0] <= t_out[0]``) and
-    ``seg_d`` the drive rows.  Returns (status, failure time, failing index, work).
+    ``seg_d`` the drive rows; ``spec`` the kernel's ``SPEC_*`` bits
+    (:func:`abb_gym.physics.model.spec_of`).  Returns (status, failure time, failing index,
+    work).  RK4 and ETDRK4 run the step functions of the vector environments on one lane.
     """
     n = s0.shape[0]
     nq = n // 2
-    nb = b.shape[0]
     s = s0.copy()
+    s2 = s.reshape((n, 1))
+    p2 = p.reshape((p.shape[0], 1))
+    b3 = b.reshape((nb, b.shape[1], 1))
     k = np.empty((7, n))
-    tmp = np.empty(n)
+    k3 = k.reshape((7, n, 1))
+    tmp = np.empty((n, 1))
+    tmp1 = np.empty(n)
+    tt = np.empty(1)
+    t1 = np.empty(1)
+    h1 = np.empty(1)
+    one = np.ones(1, dtype=np.uint8)
     s_new = np.empty(n)
-    qdd = np.empty(nq)
-    work = np.empty((nb, mdl.WORK_COLUMNS))
+    work = np.zeros((nb, mdl.WORK_COLUMNS, 1))
     wmat = np.empty((n, n))
     piv = np.empty(n, dtype=np.int64)
-    lam = np.empty(n)
-    coef = np.empty((6, n))
+    lam = np.empty((n, 1))
+    coef = np.empty((6, n, 1))
     nseg = seg_t.shape[0]
     j = 0
     while j + 1 < nseg and seg_t[j + 1] <= t_out[0]:
         j += 1
-    dl.pin_prescribed(t_out[0], s, seg_d[j], nq)
+    dl.pin_prescribed(t_out[0], s2, 0, seg_d[j], nq)
     out[0, :] = s
     count = 0
     h_adapt = h
@@ -329,22 +379,23 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
         t_end = t_out[kk + 1]
         while t < t_end:
             j_before = j
-            j = enter_segment(t, s, seg_d, nseg, j, nq)
+            j = enter_segment(t, s2, 0, seg_d, nseg, j, nq)
             if j != j_before:
                 fsal_valid = False
             piece_end, m, hh = next_piece(t, t_end, seg_d, nseg, j, h)
             d = seg_d[j]
+            d2 = d.reshape((d.shape[0], 1))
             if method == METHOD_DOPRI5:
                 tp = t
                 while tp < piece_end:
                     if not fsal_valid:
-                        mdl.state_derivative(tp, s, p, b, d, k[0], qdd, work)
+                        _rhs1(tp, s, p2, b3, d, k[0], work, tt, nb, spec)
                         count += 1
                     remaining = piece_end - tp
                     last = h_adapt >= remaining * (1.0 - 1e-12)
                     hh = remaining if last else h_adapt
-                    err = _dopri5_attempt(tp, hh, s, p, b, d, k, tmp, qdd, work, s_new,
-                                          rtol, atol)
+                    err = _dopri5_attempt(tp, hh, s, p2, b3, d, k, tmp1, work, tt, s_new,
+                                          rtol, atol, nb, spec)
                     count += 6
                     if not math.isfinite(err):
                         err = 1e10
@@ -367,32 +418,43 @@ def run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out):
                         if h_adapt < 1e-14 * (1.0 + abs(tp)):
                             return STATUS_STEP_UNDERFLOW, tp, 0, count
             else:
+                h1[0] = hh
                 for i in range(m):
                     ti = t + i * hh
                     if method == METHOD_RK4:
-                        _rk4_step(ti, hh, s, p, b, d, k, tmp, qdd, work)
+                        t1[0] = ti
+                        _rk4_step(t1, h1, s2, p2, b3, d2, k3, tmp, tt, work, one, nb, spec)
                     elif method == METHOD_ETDRK4:
-                        _etdrk4_step(ti, hh, s, p, b, d, k, tmp, qdd, work, lam, coef)
+                        t1[0] = ti
+                        _etdrk4_step(t1, h1, s2, p2, b3, d2, k3, tmp, tt, work, lam, coef,
+                                     one, nb, spec)
                     else:
-                        _ros2_step(ti, hh, s, p, b, d, k, tmp, qdd, work, wmat, piv)
+                        _ros2_step(ti, hh, s, p2, b3, d, k, tmp1, work, tt, wmat, piv,
+                                   nb, spec)
                     count += 1
                     bad = _first_nonfinite(s)
                     if bad >= 0:
                         return STATUS_NONFINITE, ti + hh, bad, count
             t = piece_end
-            dl.pin_prescribed(t, s, d, nq)
+            dl.pin_prescribed(t, s2, 0, d, nq)
             if d[dl.D_MODE] == dl.MODE_PRESCRIBED:
                 fsal_valid = False  # the pinned state may differ from the FSAL state by rounding
         out[kk + 1, :] = s
     return STATUS_OK, t_out[-1], -1, count
 
 
+run = Specialised(_run, literal=(0, 11, 12), names=("method", "balls", "effects"))
+"""``run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec)``:
+:func:`_run` compiled for this method, ball count ``nb`` and kernel specialisation ``spec``
+(each combination once, then cached), so that the equations carry exactly the scene's terms."""
+
 _NO_ATOL = np.zeros(1)
 
 
 def rk4_run(s0, t_out, seg_t, seg_d, p, b, dt_max, out):
     """Fixed-step RK4 with step <= ``dt_max``; see :func:`run`."""
-    return run(METHOD_RK4, s0, t_out, seg_t, seg_d, p, b, dt_max, 0.0, _NO_ATOL, out)
+    return run.generic(METHOD_RK4, s0, t_out, seg_t, seg_d, p, b, dt_max, 0.0, _NO_ATOL, out,
+                       b.shape[0], mdl.spec_of(p, seg_d))
 
 
 def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1e-12, out=None):
@@ -402,22 +464,23 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
     """
     n = s0.shape[0]
     nq = n // 2
+    from scipy.integrate import solve_ivp
+
     out = np.empty((len(t_out), n)) if out is None else out
-    qdd = np.empty(nq)
-    work = np.empty((b.shape[0], mdl.WORK_COLUMNS))
+    spec = mdl.spec_of(p, seg_d)
     s = np.array(s0, dtype=float)
     bounds = [t_out[0]] + [t for t in seg_t if t_out[0] < t < t_out[-1]] + [t_out[-1]]
     nfev = 0
     for a, z in zip(bounds[:-1], bounds[1:]):
         j = int(np.searchsorted(seg_t, a + 1e-12 * (1 + abs(a)), side="right") - 1)
         d = seg_d[max(j, 0)]
-        dl.pin_prescribed(a, s, d, nq)
+        dl.pin_prescribed(a, s.reshape((n, 1)), 0, d, nq)
         if a == t_out[0]:
             out[0] = s
 
         def rhs(t, y, d=d):
             ds = np.empty(n)
-            mdl.state_derivative(t, y, p, b, d, ds, qdd, work)
+            mdl.state_derivative(t, np.ascontiguousarray(y), p, b, d, ds, spec)
             return ds
 
         mask = (t_out > a) & (t_out <= z)

@@ -105,6 +105,7 @@ import numpy as np
 from numba import njit
 
 from . import contact as _contact
+from . import elementary as el
 from . import drive_law as dl
 from . import fluids as _fluids
 from .friction import friction_coefficient, friction_secant
@@ -129,10 +130,17 @@ EXTENDED_EFFECTS = frozenset({"gravity", "ball_contact", "fluid_drag", "virtual_
 B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
 B_VM, B_KLIN, B_KQUAD, B_REU, B_MEFF = range(5, 10)
 N_BALL_PARAMS = 10
-# scratch columns of accelerations(): 0-7 the ball rows, 8-9 the contact forces
-WORK_COLUMNS = 10
-W_QC = 8  # generalised contact force on the ball [N m]
-W_NC = 9  # outward radial contact force on the ball [N]
+# scratch of the contact forces, work[ball, column, lane]
+WORK_COLUMNS = 7
+W_QC = 0  # generalised contact force on the ball [N m]
+W_NC = 1  # outward radial contact force on the ball [N]
+W_FI, W_BX, W_BY, W_BTH, W_INV = range(2, 7)
+# kernel specialisation: which terms exist (compile-time constants of the vector kernels)
+SPEC_EXT = 1       # an extended effect (gravity, contact, fluid drag, virtual mass, friction)
+SPEC_ECC = 2       # race eccentricity
+SPEC_ROLL = 4      # rolling resistance
+SPEC_MOTOR = 8     # the rotor spin is a degree of freedom (motor drive rows)
+SPEC_ENVELOPE = 16  # a motor with a torque-speed envelope
 
 
 def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -192,23 +200,20 @@ def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, inline="always")
-def _ball_coupling(th, ph, p, b, i):
-    """Mass-matrix entries of ball i: (col_x, col_y, c_i, I_i, spin-inertia share of Jt)."""
-    m = b[i, B_MASS]
-    r = b[i, B_RADIUS]
-    ji = b[i, B_INERTIA]
-    big_r = p[P_R]
+def _ball_coupling(th, ph, m, r, ji, big_r, e, gam, ecc):
+    """Mass-matrix entries of one ball: (col_x, col_y, c_i, I_i, its share of Jt, sin(th+ph),
+    cos(th+ph), sin(gam-ph), cos(gam-ph)); the last two 0 without eccentricity."""
     mr = m * big_r
-    s = math.sin(th + ph)
-    c = math.cos(th + ph)
+    s, c = el.sincos(th + ph)
     ci = mr * big_r - ji * big_r / r
     jt = ji + mr * big_r
-    if p[P_ECC] != 0.0:
-        e = p[P_E]
-        cg = math.cos(p[P_GAM] - ph)
-        ci += e * mr * cg
-        jt += m * e * e + 2.0 * e * mr * cg
-    return -mr * s, mr * c, ci, ji * big_r * big_r / (r * r) + mr * big_r, jt
+    sgp = 0.0
+    cgp = 0.0
+    if ecc:
+        sgp, cgp = el.sincos(gam - ph)
+        ci += e * mr * cgp
+        jt += m * e * e + 2.0 * e * mr * cgp
+    return -mr * s, mr * c, ci, ji * big_r * big_r / (r * r) + mr * big_r, jt, s, c, sgp, cgp
 
 
 @njit(cache=True)
@@ -219,14 +224,19 @@ def mass_matrix(q, p, b):
     th = q[2]
     mm = np.zeros((nq, nq))
     total = p[P_MASS]
-    sx = p[P_U0] * math.sin(th)
-    cy = p[P_U0] * math.cos(th)
+    sth, cth = el.sincos(th)
+    sx = p[P_U0] * sth
+    cy = p[P_U0] * cth
     jt = p[P_J]
+    ecc = p[P_ECC] != 0.0
+    stg, ctg = el.sincos(th + p[P_GAM])
     for i in range(n):
-        if p[P_ECC] != 0.0:
-            sx += p[P_E] * b[i, B_MASS] * math.sin(th + p[P_GAM])
-            cy += p[P_E] * b[i, B_MASS] * math.cos(th + p[P_GAM])
-        colx, coly, ci, ii, jti = _ball_coupling(th, q[3 + i], p, b, i)
+        if ecc:
+            sx += p[P_E] * b[i, B_MASS] * stg
+            cy += p[P_E] * b[i, B_MASS] * ctg
+        colx, coly, ci, ii, jti, _, _, _, _ = _ball_coupling(
+            th, q[3 + i], b[i, B_MASS], b[i, B_RADIUS], b[i, B_INERTIA], p[P_R], p[P_E],
+            p[P_GAM], ecc)
         sx -= colx
         cy += coly
         jt += jti
@@ -261,251 +271,321 @@ def gravity_energy(q, p, b):
     if p[P_GRAV] == 0.0:
         return 0.0
     th = q[2]
-    sx = p[P_MASS] * q[0] + p[P_U0] * math.cos(th)
-    sy = p[P_MASS] * q[1] + p[P_U0] * math.sin(th)
+    sth, cth = el.sincos(th)
+    sx = p[P_MASS] * q[0] + p[P_U0] * cth
+    sy = p[P_MASS] * q[1] + p[P_U0] * sth
+    stg, ctg = el.sincos(th + p[P_GAM])
     for i in range(b.shape[0]):
         m = b[i, B_MASS]
-        sx += m * p[P_R] * math.cos(th + q[3 + i])
-        sy += m * p[P_R] * math.sin(th + q[3 + i])
+        sp, cp = el.sincos(th + q[3 + i])
+        sx += m * p[P_R] * cp
+        sy += m * p[P_R] * sp
         if p[P_ECC] != 0.0:
-            sx += m * p[P_E] * math.cos(th + p[P_GAM])
-            sy += m * p[P_E] * math.sin(th + p[P_GAM])
+            sx += m * p[P_E] * ctg
+            sy += m * p[P_E] * stg
     return -(p[P_GX] * sx + p[P_GY] * sy)
 
 
-
 @njit(cache=True, inline="always")
-def _accelerations_body(t, s, p, b, d, qdd, work, extended):
-    """The equations of motion (module docstring), once.  ``extended`` is a compile-time
-    constant: False leaves out every term of the extended effects and the drive envelope,
-    so that specialisation compiles to the kernel of a scene that switches nothing on; the
-    operations the two specialisations share run in the same order, so a scene without
-    extended effects gets bit-identical results from both (``tests/test_model.py``)."""
-    n = b.shape[0]
-    nq = 3 + n
-    x, y = s[0], s[1]
-    vx, vy = s[nq], s[nq + 1]
-    th, w, alpha, torque = dl.drive_state(t, s, d, nq, extended)
-    prescribed = d[dl.D_MODE] == dl.MODE_PRESCRIBED
-    ecc = p[P_ECC] != 0.0
-    roll = p[P_ROLL] != 0.0
-    grav = extended and p[P_GRAV] != 0.0
-    touch = extended and p[P_KC] != 0.0
-    dlaw = p[P_DLAW] if extended else 0.0
-    fric = extended and p[P_FRIC] != 0.0
-    resist = roll or fric
-    gx = p[P_GX]
-    gy = p[P_GY]
-    big_r = p[P_R]
-    if touch:
-        # pair forces first: the contact's radial part loads the race (friction, rolling)
-        _contact.ball_contacts(s, nq, b, B_RADIUS, B_MEFF, big_r, p[P_KC], p[P_ZC], work,
-                               W_QC, W_NC)
-    e = p[P_E]
-    gam = p[P_GAM]
-    w2 = w * w
-    sth = math.sin(th)
-    cth = math.cos(th)
-    total = p[P_MASS]
-    sx = p[P_U0] * sth
-    cy = p[P_U0] * cth
-    fx = -p[P_CX] * vx - p[P_KX] * x + p[P_U0] * cth * w2
-    fy = -p[P_CY] * vy - p[P_KY] * y + p[P_U0] * sth * w2
-    fth = torque - p[P_BETA0] * w
-    jt = p[P_J]
+def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
+    """One ball's terms of the equations (module docstring), from scalars only, so that the
+    lane loop that calls it vectorises: (col_x, col_y, c_i, I_i, its Jt share, its Sx and Cy
+    shares, its x and y forces, its rotor torque, the generalised force Q_i and the rows
+    b_x, b_y, b_th of the ball equation ``I_i ph'' + b_x x'' + b_y y'' + b_th th'' = Q_i``).
+
+    The inputs come in tuples (a call with more than 30 arguments compiles to a star-args
+    call, which numba cannot inline): ``ball`` (m, r, J_i, beta_i, mu_r / r, virtual mass),
+    ``geometry`` (R, u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs``
+    (contact Q and N, the drag law's coefficients, the friction law's), ``flags`` (ext, ecc,
+    roll, grav, touch, fric: compile-time constants of the specialised kernels)."""
+    m, r, ji, beta, mur, vm = ball
+    big_r, ureg, e, gam, stg, ctg, gx, gy = geometry
+    (qc, nc, klin, kquad, reu, dlaw, a0, a1, a2, a3, plateau, muk, mus, ufr,
+     ustr) = extended_inputs
+    ext, ecc, roll, grav, touch, fric = flags
+    mr = m * big_r
+    colx, coly, ci, ii, jti, sp, cp, sgp, cgp = _ball_coupling(th, ph, m, r, ji, big_r, e,
+                                                               gam, ecc)
+    if ext:
+        ii += vm
+    sx = -colx
+    cy = coly
+    wrel2 = (w + dph) * (w + dph)
+    fx = mr * wrel2 * cp
+    fy = mr * wrel2 * sp
+    fth = 0.0
+    fi = -beta * dph
+    if ext and dlaw != 0.0:
+        drag, slope = _fluids.race_drag(big_r * dph, dlaw, klin, kquad, reu, a0, a1, a2, a3,
+                                        plateau)
+        fi -= drag * big_r
+    if ext and touch:
+        fi += qc
+    bx = colx
+    by = coly
+    bth = ci
     if ecc:
-        stg = math.sin(th + gam)
-        ctg = math.cos(th + gam)
-    else:
+        sx += e * m * stg
+        cy += e * m * ctg
+        fx += e * m * ctg * w2
+        fy += e * m * stg * w2
+        fth -= e * mr * sgp * dph * (2.0 * w + dph)
+        fi += mr * e * sgp * w2
+    if ext and grav:
+        # g m R sin(a - th - ph): the weight's component along the track
+        fi += mr * (gy * cp - gx * sp)
+    if roll or (ext and fric):
+        # friction-type forces -coef R N with the race normal force N (module docstring)
+        kr = mur * mr * el.tanh(big_r * dph / ureg) if roll else 0.0
+        if ext and fric:
+            kr += mr * friction_coefficient(big_r * dph, muk, mus, ufr, ustr)
+        if ext and grav:
+            # |N|: a ball that the weight presses onto the inner wall of the annulus
+            # (N < 0) is still resisted; the sign comes from the velocity-dependent part
+            n0 = big_r * wrel2 + gx * cp + gy * sp
+            if ecc:
+                n0 += e * w2 * cgp
+            if touch:
+                n0 += nc / m
+            if n0 < 0.0:
+                kr = -kr
+            fi -= kr * (gx * cp + gy * sp)
+        fi -= kr * big_r * wrel2
+        bx -= kr * cp
+        by -= kr * sp
+        if ecc:
+            fi -= kr * e * w2 * cgp
+            bth += kr * e * sgp
+        if ext and touch:
+            fi -= kr * nc / m
+    return colx, coly, ci, ii, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
+
+
+@njit(cache=True, error_model="numpy")
+def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
+    """The equations of motion, once, for a block of lanes (one environment per lane):
+    ``ds[:, l]`` = d(state)/dt of lane ``l`` at time ``t[l]``.
+
+    Arrays carry the lane last: ``s``, ``ds`` (2 (3 + nb), L), ``p`` (N_PARAMS, L), ``b``
+    (nb, N_BALL_PARAMS, L), ``d`` (N_DRIVE, L) the current drive row of each lane, ``work``
+    (nb, WORK_COLUMNS, L) scratch of the contact forces.  ``spec`` (``SPEC_*`` bits) says which
+    terms exist; with ``nb`` and ``spec`` compile-time constants (literal types given by
+    :class:`~abb_gym.physics.specialise.Specialised`: one compilation per literal pair) the
+    lane loop compiles to straight-line code over all lanes at once (AVX2: four lanes per instruction,
+    with the LLVM options of :mod:`abb_gym.physics.elementary`); with run-time values it is
+    the general kernel.  Either way every lane does the same arithmetic in the same order, so
+    the results agree bit for bit.
+
+    The balls are eliminated by a Schur complement (module docstring) accumulated ball by
+    ball; the balls' accelerations then need their terms again, which are recomputed rather
+    than stored: stores to scratch memory inside the loop would stop its vectorisation."""
+    L = s.shape[1]
+    nq = 3 + nb
+    ext = (spec & SPEC_EXT) != 0
+    ecc = (spec & SPEC_ECC) != 0
+    roll = (spec & SPEC_ROLL) != 0
+    motor = (spec & SPEC_MOTOR) != 0
+    envelope = (spec & SPEC_ENVELOPE) != 0
+    for l in range(L):
+        x = s[0, l]
+        y = s[1, l]
+        vx = s[nq, l]
+        vy = s[nq + 1, l]
+        tau = t[l] - d[dl.D_T0, l]
+        if motor:
+            th = s[2, l]
+            w = s[nq + 2, l]
+            torque = dl.motor_law(tau, w, d[dl.D_TORQUE, l], d[dl.D_GAIN, l], d[dl.D_TW0, l],
+                                  d[dl.D_TALPHA, l], d[dl.D_TLIM, l], d[dl.D_WNL, l],
+                                  d[dl.D_PLIM, l], envelope)
+            alpha = 0.0
+        else:
+            th, w, alpha = dl.prescribed_law(tau, d[dl.D_TH0, l], d[dl.D_W0, l],
+                                             d[dl.D_ALPHA, l])
+            torque = 0.0
+        big_r = p[P_R, l]
+        ureg = p[P_UREG, l]
+        e = p[P_E, l]
+        gam = p[P_GAM, l]
+        gx = p[P_GX, l]
+        gy = p[P_GY, l]
+        grav = ext and p[P_GRAV, l] != 0.0
+        touch = ext and p[P_KC, l] != 0.0
+        fric = ext and p[P_FRIC, l] != 0.0
+        dlaw = p[P_DLAW, l] if ext else 0.0
+        if touch:
+            # pair forces first: the contact's radial part loads the race (friction, rolling)
+            _contact.ball_contacts_lane(s, l, nq, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l],
+                                        p[P_ZC, l], work, W_QC, W_NC)
+        w2 = w * w
+        sth, cth = el.sincos(th)
         stg = 0.0
         ctg = 0.0
-    for i in range(n):
-        m = b[i, B_MASS]
-        ph = s[3 + i]
-        dph = s[nq + 3 + i]
-        mr = m * big_r
-        sp = math.sin(th + ph)
-        cp = math.cos(th + ph)
-        colx, coly, ci, ii, jti = _ball_coupling(th, ph, p, b, i)
-        if extended:
-            ii += b[i, B_VM]
-        sx -= colx
-        cy += coly
-        jt += jti
-        wrel2 = (w + dph) * (w + dph)
-        fx += mr * wrel2 * cp
-        fy += mr * wrel2 * sp
-        fi = -b[i, B_BETA] * dph
-        if dlaw != 0.0:
-            drag, slope = _fluids.race_drag(big_r * dph, dlaw, b[i, B_KLIN], b[i, B_KQUAD],
-                                            b[i, B_REU], p[P_CD0], p[P_CD1], p[P_CD2],
-                                            p[P_CD3], p[P_CDINF])
-            fi -= drag * big_r
-        if touch:
-            fi += work[i, W_QC]
-        bx = colx
-        by = coly
-        bth = ci
         if ecc:
-            sgp = math.sin(gam - ph)
-            cgp = math.cos(gam - ph)
-            sx += e * m * stg
-            cy += e * m * ctg
-            fx += e * m * ctg * w2
-            fy += e * m * stg * w2
-            fth -= e * mr * sgp * dph * (2.0 * w + dph)
-            fi += mr * e * sgp * w2
+            stg, ctg = el.sincos(th + gam)
+        geometry = (big_r, ureg, e, gam, stg, ctg, gx, gy)
+        law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
+               p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+        flags = (ext, ecc, roll, grav, touch, fric)
+        total = p[P_MASS, l]
+        u0 = p[P_U0, l]
+        sx = u0 * sth
+        cy = u0 * cth
+        fx = -p[P_CX, l] * vx - p[P_KX, l] * x + u0 * cth * w2
+        fy = -p[P_CY, l] * vy - p[P_KY, l] * y + u0 * sth * w2
+        fth = torque - p[P_BETA0, l] * w
+        jt = p[P_J, l]
+        # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
+        d00 = 0.0
+        d01 = 0.0
+        d10 = 0.0
+        d11 = 0.0
+        d02 = 0.0
+        d12 = 0.0
+        d20 = 0.0
+        d21 = 0.0
+        d22 = 0.0
+        g0 = 0.0
+        g1 = 0.0
+        g2 = 0.0
+        for i in range(nb):
+            colx, coly, ci, ii, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
+                th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
+                (b[i, B_MASS, l], b[i, B_RADIUS, l], b[i, B_INERTIA, l], b[i, B_BETA, l],
+                 b[i, B_MUR, l], b[i, B_VM, l]), geometry,
+                (work[i, W_QC, l], work[i, W_NC, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
+                 b[i, B_REU, l]) + law, flags)
+            sx += sxi
+            cy += cyi
+            jt += jti
+            fx += fxi
+            fy += fyi
+            fth += fthi
+            if not motor:
+                fi -= bth * alpha
+            inv = 1.0 / ii
+            work[i, W_FI, l] = fi
+            work[i, W_BX, l] = bx
+            work[i, W_BY, l] = by
+            work[i, W_BTH, l] = bth
+            work[i, W_INV, l] = inv
+            d00 += colx * bx * inv
+            d01 += colx * by * inv
+            d10 += coly * bx * inv
+            d11 += coly * by * inv
+            g0 += colx * fi * inv
+            g1 += coly * fi * inv
+            if motor:
+                d02 += colx * bth * inv
+                d12 += coly * bth * inv
+                d20 += ci * bx * inv
+                d21 += ci * by * inv
+                d22 += ci * bth * inv
+                g2 += ci * fi * inv
         if grav:
-            # g m R sin(a - th - ph): the weight's component along the track
-            fi += mr * (gy * cp - gx * sp)
-        if resist:
-            # friction-type forces -coef R N with the race normal force N (module docstring)
-            if roll:
-                kr = b[i, B_MUR] * mr * math.tanh(big_r * dph / p[P_UREG])
-            else:
-                kr = 0.0
-            if fric:
-                kr += mr * friction_coefficient(big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR],
-                                                p[P_USTR])
-            if grav:
-                # |N|: a ball that the weight presses onto the inner wall of the annulus
-                # (N < 0) is still resisted; the sign comes from the velocity-dependent part
-                n0 = big_r * wrel2 + gx * cp + gy * sp
-                if ecc:
-                    n0 += e * w2 * cgp
-                if touch:
-                    n0 += work[i, W_NC] / m
-                if n0 < 0.0:
-                    kr = -kr
-                fi -= kr * (gx * cp + gy * sp)
-            fi -= kr * big_r * wrel2
-            bx -= kr * cp
-            by -= kr * sp
-            if ecc:
-                fi -= kr * e * w2 * cgp
-                bth += kr * e * sgp
-            if touch:
-                fi -= kr * work[i, W_NC] / m
-        work[i, 0] = bx
-        work[i, 1] = by
-        work[i, 2] = bth
-        work[i, 3] = fi
-        work[i, 4] = ii
-        work[i, 5] = colx
-        work[i, 6] = coly
-        work[i, 7] = ci
-    if grav:
-        fx += total * gx
-        fy += total * gy
-        fth += gy * cy - gx * sx
-    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] and its Schur complement
-    a00 = total
-    a01 = 0.0
-    a10 = 0.0
-    a11 = total
-    a02 = -sx
-    a12 = cy
-    a20 = -sx
-    a21 = cy
-    a22 = jt
-    if prescribed:
-        fx -= a02 * alpha
-        fy -= a12 * alpha
-    for i in range(n):
-        bx, by, bth, fi, ii = work[i, 0], work[i, 1], work[i, 2], work[i, 3], work[i, 4]
-        colx, coly, ci = work[i, 5], work[i, 6], work[i, 7]
-        if prescribed:
-            fi -= bth * alpha
-        inv = 1.0 / ii
-        a00 -= colx * bx * inv
-        a01 -= colx * by * inv
-        a10 -= coly * bx * inv
-        a11 -= coly * by * inv
-        fx -= colx * fi * inv
-        fy -= coly * fi * inv
-        if not prescribed:
-            a02 -= colx * bth * inv
-            a12 -= coly * bth * inv
-            a20 -= ci * bx * inv
-            a21 -= ci * by * inv
-            a22 -= ci * bth * inv
-            fth -= ci * fi * inv
-    if prescribed:
-        det = a00 * a11 - a01 * a10
-        ax = (fx * a11 - a01 * fy) / det
-        ay = (a00 * fy - a10 * fx) / det
-        ath = alpha
-    else:
-        c00 = a11 * a22 - a12 * a21
-        c01 = a12 * a20 - a10 * a22
-        c02 = a10 * a21 - a11 * a20
-        det = a00 * c00 + a01 * c01 + a02 * c02
-        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
-        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
-        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
-    qdd[0] = ax
-    qdd[1] = ay
-    qdd[2] = ath
-    for i in range(n):
-        qdd[3 + i] = (work[i, 3] - work[i, 0] * ax - work[i, 1] * ay - work[i, 2] * ath) \
-            / work[i, 4]
-    return torque
+            fx += total * gx
+            fy += total * gy
+            fth += gy * cy - gx * sx
+        # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] minus D
+        a00 = total - d00
+        a01 = -d01
+        a10 = -d10
+        a11 = total - d11
+        if motor:
+            a02 = -sx - d02
+            a12 = cy - d12
+            a20 = -sx - d20
+            a21 = cy - d21
+            a22 = jt - d22
+            fx -= g0
+            fy -= g1
+            fth -= g2
+            c00 = a11 * a22 - a12 * a21
+            c01 = a12 * a20 - a10 * a22
+            c02 = a10 * a21 - a11 * a20
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
+            ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
+            ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
+        else:
+            # the prescribed th'' moves to the right-hand side
+            fx += -sx * -alpha - g0
+            fy -= cy * alpha + g1
+            det = a00 * a11 - a01 * a10
+            ax = (fx * a11 - a01 * fy) / det
+            ay = (a00 * fy - a10 * fx) / det
+            ath = alpha
+        for i in range(nb):
+            ds[3 + i, l] = s[nq + 3 + i, l]
+            # W_FI holds Q_i less the prescribed b_th th'' already
+            qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
+            if motor:
+                qi -= work[i, W_BTH, l] * ath
+            ds[nq + 3 + i, l] = qi * work[i, W_INV, l]
+        ds[0, l] = vx
+        ds[1, l] = vy
+        ds[2, l] = s[nq + 2, l] if motor else w
+        ds[nq, l] = ax
+        ds[nq + 1, l] = ay
+        ds[nq + 2, l] = ath
 
 
-@njit(cache=True)
-def accelerations_plain(t, s, p, b, d, qdd, work):
-    """:func:`accelerations` of a scene without extended effects and a drive row without an
-    envelope (the compiled specialisation with ``extended=False``)."""
-    return _accelerations_body(t, s, p, b, d, qdd, work, False)
+def spec_of(p: np.ndarray, d: np.ndarray) -> int:
+    """The ``SPEC_*`` bits of packed parameters ``p`` (one environment) and its drive rows
+    ``d`` (one row or a table; every row of a run has the same mode); with ``p`` of many
+    environments (R, N_PARAMS) and their tables ``d`` (R, rows, N_DRIVE), the union of theirs."""
+    p = np.asarray(p)
+    rows = np.asarray(d).reshape(-1, np.shape(d)[-1])
+    spec = 0
+    if np.any(p[..., P_EXT] != 0.0):
+        spec |= SPEC_EXT
+    if np.any(p[..., P_ECC] != 0.0):
+        spec |= SPEC_ECC
+    if np.any(p[..., P_ROLL] != 0.0):
+        spec |= SPEC_ROLL
+    if np.any(rows[:, dl.D_MODE] == dl.MODE_MOTOR):
+        spec |= SPEC_MOTOR
+        if np.any(rows[:, dl.D_WNL] != 0.0) or np.any(rows[:, dl.D_PLIM] != 0.0):
+            spec |= SPEC_ENVELOPE
+    return spec
 
 
-@njit(cache=True)
-def accelerations_extended(t, s, p, b, d, qdd, work):
-    """:func:`accelerations` with every extended effect evaluated where its flag is set."""
-    return _accelerations_body(t, s, p, b, d, qdd, work, True)
+def make_work(n_balls: int, lanes: int = 1) -> np.ndarray:
+    """Scratch array for :func:`accelerations_block` (contact forces per ball and lane)."""
+    return np.zeros((n_balls, WORK_COLUMNS, lanes))
 
 
-@njit(cache=True, inline="always")
-def uses_extended(p, d):
-    """True if the scene parameters ``p`` or drive row ``d`` need the extended kernel."""
-    return p[P_EXT] != 0.0 or dl.needs_envelope(d)
+@njit(cache=True, error_model="numpy")
+def state_derivative(t, s, p, b, d, ds, spec):
+    """ds/dt of one environment (1-D arrays: state, parameters, one drive row): the block
+    kernel on one lane (the general kernel: ``spec`` at run time)."""
+    nb = b.shape[0]
+    ns = s.shape[0]
+    tt = np.full(1, t)
+    work = np.zeros((nb, WORK_COLUMNS, 1))
+    accelerations_block(tt, s.reshape((ns, 1)), p.reshape((p.shape[0], 1)),
+                        b.reshape((nb, b.shape[1], 1)), d.reshape((d.shape[0], 1)),
+                        ds.reshape((ns, 1)), work, nb, spec)
 
 
-@njit(cache=True, inline="always")
-def accelerations(t, s, p, b, d, qdd, work):
-    """Fill ``qdd`` (length 3 + n) with the generalised accelerations at state ``s``.
-
-    ``d`` is the drive row of the current segment, ``work`` an (n, WORK_COLUMNS) scratch
-    array.  With a prescribed drive, th and th' are taken from the drive law (the state's
-    entries are ignored) and qdd[2] is the prescribed acceleration.  Returns the motor torque
-    [N m] (0 if prescribed).
-
-    Dispatches to one of the two specialisations of the single body
-    :func:`_accelerations_body`: a scene with no extended effect runs the plain one.  (One
-    kernel testing a run-time flag per effect measured 10-20 % slower per right-hand side on
-    scenes that switch nothing on: code size defeats LLVM's inlining; the dispatch costs ~3 %.)
-    """
-    if uses_extended(p, d):
-        return accelerations_extended(t, s, p, b, d, qdd, work)
-    # the plain body inlined here rather than called: as a call it cost ~12 %
-    return _accelerations_body(t, s, p, b, d, qdd, work, False)
-
-
-def make_work(n_balls: int) -> np.ndarray:
-    """Scratch array for :func:`accelerations`."""
-    return np.zeros((n_balls, WORK_COLUMNS))
-
-
-@njit(cache=True)
-def state_derivative(t, s, p, b, d, ds, qdd, work):
-    """ds/dt for the first-order state; with a prescribed drive the th-rows follow the drive."""
-    nq = 3 + b.shape[0]
-    accelerations(t, s, p, b, d, qdd, work)
-    for k in range(nq):
-        ds[k] = s[nq + k]
-        ds[nq + k] = qdd[k]
-    if d[dl.D_MODE] == dl.MODE_PRESCRIBED:
-        ds[2] = dl.prescribed_state(t, d)[1]
+def accelerations(t, s, p, b, d, qdd=None, work=None):
+    """Generalised accelerations (length 3 + n) of one environment at state ``s`` under drive
+    row ``d`` (a convenience for tests and analysis; the kernels use
+    :func:`accelerations_block`).  Returns the motor torque [N m] (0 if prescribed) when
+    ``qdd`` is given (filled in place), else the accelerations."""
+    s = np.ascontiguousarray(s, dtype=float)
+    ds = np.empty_like(s)
+    state_derivative(float(t), s, np.ascontiguousarray(p, float), np.ascontiguousarray(b, float),
+                     np.ascontiguousarray(d, float), ds, spec_of(p, d))
+    nq = s.shape[0] // 2
+    if qdd is None:
+        return ds[nq:].copy()
+    qdd[:] = ds[nq:]
+    if d[dl.D_MODE] == dl.MODE_MOTOR:
+        envelope = bool(d[dl.D_WNL] != 0.0 or d[dl.D_PLIM] != 0.0)
+        return dl.motor_torque(float(t), float(s[nq + 2]), np.ascontiguousarray(d, float),
+                               envelope)
+    return 0.0
 
 
 @njit(cache=True)
@@ -524,62 +604,11 @@ def total_energy(s, p, b):
     return e
 
 
-@njit(cache=True, inline="always")
-def _drag_rates_body(t, s, p, b, d, lam, extended):
-    """:func:`drag_rates`, once; ``extended`` as in :func:`_accelerations_body`."""
-    n = b.shape[0]
-    nq = 3 + n
-    th, w, alpha, torque = dl.drive_state(t, s, d, nq, extended)
-    for j in range(2 * nq):
-        lam[j] = 0.0
-    big_r = p[P_R]
-    for i in range(n):
-        m = b[i, B_MASS]
-        r = b[i, B_RADIUS]
-        ii = b[i, B_INERTIA] * big_r * big_r / (r * r) + m * big_r * big_r
-        if extended:
-            ii += b[i, B_VM]
-        rate = b[i, B_BETA]
-        dph = s[nq + 3 + i]
-        if p[P_ROLL] != 0.0:
-            ch = math.cosh(big_r * dph / p[P_UREG])
-            rate += b[i, B_MUR] * m * big_r ** 3 * (w + dph) ** 2 / (ch * ch * p[P_UREG])
-        if extended:
-            if p[P_DLAW] != 0.0:
-                drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW], b[i, B_KLIN],
-                                                b[i, B_KQUAD], b[i, B_REU], p[P_CD0],
-                                                p[P_CD1], p[P_CD2], p[P_CD3], p[P_CDINF])
-                rate += big_r * big_r * slope
-            if p[P_FRIC] != 0.0:
-                normal = m * big_r * (w + dph) ** 2
-                if p[P_GRAV] != 0.0:
-                    normal += m * (p[P_GX] * math.cos(th + s[3 + i])
-                                   + p[P_GY] * math.sin(th + s[3 + i]))
-                rate += big_r * big_r * abs(normal) * friction_secant(
-                    big_r * dph, p[P_MUK], p[P_MUS], p[P_UFR], p[P_USTR])
-        lam[nq + 3 + i] = rate / ii
-        if extended and p[P_KC] != 0.0:
-            lam[nq + 3 + i] += _contact.contact_rate(s, i, b, B_RADIUS, B_MEFF, big_r,
-                                                     p[P_KC], p[P_ZC])
-
-
-@njit(cache=True)
-def drag_rates_plain(t, s, p, b, d, lam):
-    """:func:`drag_rates` without extended effects (``extended=False``)."""
-    _drag_rates_body(t, s, p, b, d, lam, False)
-
-
-@njit(cache=True)
-def drag_rates_extended(t, s, p, b, d, lam):
-    """:func:`drag_rates` with the extended effects."""
-    _drag_rates_body(t, s, p, b, d, lam, True)
-
-
-@njit(cache=True, inline="always")
-def drag_rates(t, s, p, b, d, lam):
-    """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state size).
-
-    For ball i, lam[ph_i'] = (beta_i + d(resisting force)/d(ph_i')) / I_i, the race drag plus:
+@njit(cache=True, error_model="numpy")
+def drag_rates_block(t, s, p, b, d, lam, nb, spec):
+    """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state rows x
+    lanes; every other row 0): for ball i, lam[ph_i'] = (beta_i + d(resisting force) /
+    d(ph_i')) / I_i, the race drag plus
 
     * the slope of the smoothed rolling resistance, mu_r m R^3 (th' + ph')^2 sech^2(R ph'/u*)
       / u*, which grows with the rotor speed squared;
@@ -593,12 +622,63 @@ def drag_rates(t, s, p, b, d, lam):
       relaxation, so it is not integrated exactly by ``etdrk4``; it is here so that the RK4
       step rule keeps h omega_c inside RK4's stability region.
 
-    Every other entry is 0.  This is the stiff, nearly diagonal part of the Jacobian (the
-    coupling through the rotor, of relative size m_i / M, is left out); the exponential
-    integrator treats it exactly and the step-size rule of the explicit methods bounds h * lam.
-    Dispatches like :func:`accelerations`.
-    """
-    if uses_extended(p, d):
-        drag_rates_extended(t, s, p, b, d, lam)
-    else:
-        _drag_rates_body(t, s, p, b, d, lam, False)
+    This is the stiff, nearly diagonal part of the Jacobian (the coupling through the rotor,
+    of relative size m_i / M, is left out); the exponential integrator treats it exactly and
+    the step-size rule of the explicit methods bounds h * lam.  Lanes as in
+    :func:`accelerations_block`."""
+    L = s.shape[1]
+    nq = 3 + nb
+    ext = (spec & SPEC_EXT) != 0
+    roll = (spec & SPEC_ROLL) != 0
+    motor = (spec & SPEC_MOTOR) != 0
+    for l in range(L):
+        if motor:
+            th = s[2, l]
+            w = s[nq + 2, l]
+        else:
+            th, w, _ = dl.prescribed_law(t[l] - d[dl.D_T0, l], d[dl.D_TH0, l], d[dl.D_W0, l],
+                                         d[dl.D_ALPHA, l])
+        for j in range(2 * nq):
+            lam[j, l] = 0.0
+        big_r = p[P_R, l]
+        for i in range(nb):
+            m = b[i, B_MASS, l]
+            r = b[i, B_RADIUS, l]
+            ii = b[i, B_INERTIA, l] * big_r * big_r / (r * r) + m * big_r * big_r
+            if ext:
+                ii += b[i, B_VM, l]
+            rate = b[i, B_BETA, l]
+            dph = s[nq + 3 + i, l]
+            if roll:
+                tnh = el.tanh(big_r * dph / p[P_UREG, l])
+                rate += (b[i, B_MUR, l] * m * big_r ** 3 * (w + dph) ** 2 * (1.0 - tnh * tnh)
+                         / p[P_UREG, l])
+            if ext:
+                if p[P_DLAW, l] != 0.0:
+                    drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
+                                                    b[i, B_KQUAD, l], b[i, B_REU, l],
+                                                    p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
+                                                    p[P_CD3, l], p[P_CDINF, l])
+                    rate += big_r * big_r * slope
+                if p[P_FRIC, l] != 0.0:
+                    normal = m * big_r * (w + dph) ** 2
+                    if p[P_GRAV, l] != 0.0:
+                        sp, cp = el.sincos(th + s[3 + i, l])
+                        normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
+                    rate += big_r * big_r * abs(normal) * friction_secant(
+                        big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+            lam[nq + 3 + i, l] = rate / ii
+            if ext and p[P_KC, l] != 0.0:
+                lam[nq + 3 + i, l] += _contact.contact_rate_lane(s, l, i, b, B_RADIUS, B_MEFF,
+                                                                 big_r, p[P_KC, l], p[P_ZC, l])
+
+
+@njit(cache=True, error_model="numpy")
+def drag_rates(t, s, p, b, d, lam, spec):
+    """:func:`drag_rates_block` of one environment (1-D arrays)."""
+    nb = b.shape[0]
+    ns = s.shape[0]
+    tt = np.full(1, t)
+    drag_rates_block(tt, s.reshape((ns, 1)), p.reshape((p.shape[0], 1)),
+                     b.reshape((nb, b.shape[1], 1)), d.reshape((d.shape[0], 1)),
+                     lam.reshape((ns, 1)), nb, spec)

@@ -47,14 +47,16 @@ __all__ = ["imbalance_scale", "residual_imbalance", "residual_imbalance_packed",
            "spinning_inertia", "static_deflection"]
 
 
-def imbalance_scale(scene: Scene) -> float:
+def imbalance_scale(scene: Scene, imbalance=None):
     """Imbalance [kg m] that normalises residual imbalances: the primary imbalance U0 if
     positive, else the race-eccentricity imbalance ``sum m_i E``, else the balancing capacity
-    ``sum m_i R`` (a machine with nothing to balance)."""
-    if scene.imbalance > 0:
-        return scene.imbalance
+    ``sum m_i R`` (a machine with nothing to balance).  ``imbalance``: U0 instead of the
+    scene's (may be an array: the episodes of many environments)."""
+    u0 = scene.imbalance if imbalance is None else imbalance
     ecc = float(sum(scene.ball_mass)) * scene.race_eccentricity
-    return ecc if ecc > 0 else scene.balancing_capacity
+    other = ecc if ecc > 0 else scene.balancing_capacity
+    out = np.where(np.asarray(u0) > 0, u0, other)
+    return float(out) if out.ndim == 0 else out
 
 
 @njit(cache=True)
@@ -83,19 +85,18 @@ def residual_imbalance(scene: Scene, ball_angles) -> np.ndarray | float:
     return np.array([residual_imbalance_packed(p, b, a) for a in angles])
 
 
-def best_residual(scene: Scene) -> float:
-    """Smallest residual imbalance [kg m] the balls can reach (module docstring)."""
+def best_residual(scene: Scene, imbalance=None):
+    """Smallest residual imbalance [kg m] the balls can reach (module docstring);
+    ``imbalance``: U0 instead of the scene's (may be an array)."""
+    u0 = scene.imbalance if imbalance is None else np.asarray(imbalance, float)
     mr = np.asarray(scene.ball_mass) * scene.race_radius
     cap = float(mr.sum())
     lo = max(0.0, 2.0 * float(mr.max()) - cap)
     me = float(sum(scene.ball_mass)) * scene.race_eccentricity
-    fixed = math.hypot(scene.imbalance + me * math.cos(scene.race_eccentricity_angle),
-                       me * math.sin(scene.race_eccentricity_angle))
-    if fixed < lo:
-        return lo - fixed
-    if fixed > cap:
-        return fixed - cap
-    return 0.0
+    fixed = np.hypot(u0 + me * math.cos(scene.race_eccentricity_angle),
+                     me * math.sin(scene.race_eccentricity_angle))
+    out = np.where(fixed < lo, lo - fixed, np.where(fixed > cap, fixed - cap, 0.0))
+    return float(out) if out.ndim == 0 else out
 
 
 @njit(cache=True, inline="always")
@@ -116,7 +117,7 @@ def reference_amplitudes(scene: Scene, operating_speed: float, imbalance: float 
                          ) -> tuple[float, float]:
     """(peak over [0, w_op], value at w_op) [m] of the steady whirl of the same machine with
     its balancer off (module docstring): mass ``total_mass``, the scene's support, imbalance
-    ``imbalance`` [kg m] (default: :func:`imbalance_scale`).
+    ``imbalance`` [kg m] (default: :func:`imbalance_scale`; an array gives arrays).
 
     With an orthotropic support each axis is a Jeffcott oscillator of its own; the orbit's
     major semi-axis is the larger of the two amplitudes.  The peak of ``U w^2 / |...|`` lies at
@@ -129,13 +130,15 @@ def reference_amplitudes(scene: Scene, operating_speed: float, imbalance: float 
     for k, c in ((scene.support_stiffness_x, scene.support_damping_x),
                  (scene.support_stiffness_y, scene.support_damping_y)):
         a_op = jeffcott_amplitude(u, m, k, c, operating_speed)
-        at_op = max(at_op, a_op)
-        peak = max(peak, a_op)
+        at_op = np.maximum(at_op, a_op)
+        peak = np.maximum(peak, a_op)
         den = m - c * c / (2.0 * k)
         if den > 0:
             w_star = math.sqrt(k / den)
             if w_star <= operating_speed:
-                peak = max(peak, jeffcott_amplitude(u, m, k, c, w_star))
+                peak = np.maximum(peak, jeffcott_amplitude(u, m, k, c, w_star))
+    if np.ndim(peak) == 0:
+        return float(peak), float(at_op)
     return peak, at_op
 
 

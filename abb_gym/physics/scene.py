@@ -46,6 +46,16 @@ __all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError"]
 ANGLE_LIMIT = 1.0e3  # rad: beyond it, rounding of the angle changes the machine
 
 
+def reference_length(rotor_eccentricity, race_eccentricity, capacity, total_mass):
+    """:attr:`Scene.reference_length` [m] from its ingredients; ``rotor_eccentricity`` may be an
+    array (the episodes of many environments)."""
+    if race_eccentricity > 0:
+        fallback = race_eccentricity
+    else:
+        fallback = capacity / total_mass
+    return np.where(np.asarray(rotor_eccentricity) > 0, rotor_eccentricity, fallback)
+
+
 class SceneError(ConfigError):
     """A scene file or override is invalid; the message names the field and its allowed range."""
 
@@ -203,11 +213,8 @@ class Scene:
 
         The rotor eccentricity when there is one, otherwise the race eccentricity, otherwise the
         ball imbalance spread over the total mass."""
-        if self.rotor_eccentricity > 0:
-            return self.rotor_eccentricity
-        if self.race_eccentricity > 0:
-            return self.race_eccentricity
-        return self.balancing_capacity / self.total_mass
+        return float(reference_length(self.rotor_eccentricity, self.race_eccentricity,
+                                      self.balancing_capacity, self.total_mass))
 
     @property
     def effects(self) -> frozenset[str]:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
+from numba import njit
 
 from . import integrators as integ
 from . import drive_law as dl
@@ -16,6 +17,7 @@ from .drives import MotorDrive, SpeedProfile
 from .scene import Scene, load_scene
 
 __all__ = ["simulate", "Trajectory", "SimulationError", "default_step", "stiff_rate",
+           "stiff_rates",
            "initial_state", "state_scale", "METHODS"]
 
 COMPILED_METHODS = tuple(integ.METHOD_IDS)
@@ -48,12 +50,30 @@ def stiff_rate(scene: Scene, max_speed: float) -> float:
     rotor speed: together they bound the step of the explicit methods (RK4: h * rate < 2.79).
     """
     p, b = mdl.pack_parameters(scene)
-    nq = 3 + scene.ball_count
+    return float(stiff_rates(p[None], b[None], max_speed)[0])
+
+
+def stiff_rates(p: np.ndarray, b: np.ndarray, max_speed: float) -> np.ndarray:
+    """:func:`stiff_rate` [1/s] of many packed parameter sets at once: ``p`` (R, N_PARAMS),
+    ``b`` (R, n, N_BALL_PARAMS) (the episodes of a vector environment)."""
     d = np.zeros(dl.N_DRIVE)
     d[dl.D_W0] = max_speed
-    lam = np.zeros(2 * nq)
-    mdl.drag_rates(0.0, np.zeros(2 * nq), p, b, d, lam)
-    return float(lam.max())
+    spec = 0
+    for row in p:
+        spec |= mdl.spec_of(row, d)
+    return _stiff_rates(np.ascontiguousarray(p, float), np.ascontiguousarray(b, float), d, spec)
+
+
+@njit(cache=True)
+def _stiff_rates(p, b, d, spec):
+    ns = 2 * (3 + b.shape[1])
+    out = np.empty(p.shape[0])
+    s = np.zeros(ns)
+    lam = np.zeros(ns)
+    for r in range(p.shape[0]):
+        mdl.drag_rates(0.0, s, p[r], b[r], d, lam, spec)
+        out[r] = lam.max()
+    return out
 
 
 # rotation of the fastest motion per step [rad]; ETDRK4 integrates the stiff ball drag
@@ -66,8 +86,9 @@ def contact_frequency(scene: Scene) -> float:
     return math.sqrt(4.0 * scene.contact_stiffness / min(scene.ball_mass))
 
 
-def default_step(scene: Scene, max_speed: float, method: str = "rk4") -> float:
-    """Default step [s] of the fixed-step methods for a run reaching ``max_speed`` [rad/s].
+def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None):
+    """Default step [s] of the fixed-step methods for a run reaching ``max_speed`` [rad/s]
+    (``rate``: the :func:`stiff_rate` if known, or an array of them: an array of steps).
 
     The step turns the fastest rotation (the higher critical speed or ``max_speed``) by at most
     :data:`ROTATION_PER_STEP` (0.4 rad for RK4 and ROS2, 1.0 rad for ETDRK4).  For the explicit
@@ -81,12 +102,11 @@ def default_step(scene: Scene, max_speed: float, method: str = "rk4") -> float:
     omega = max(scene.critical_speeds[1], abs(max_speed), 1e-9)
     h = ROTATION_PER_STEP.get(method, 0.4) / omega
     if method == "rk4":
-        rate = stiff_rate(scene, max_speed)
-        if rate > 0:
-            h = min(h, 1.5 / rate)
+        rate = stiff_rate(scene, max_speed) if rate is None else rate
+        h = np.where(np.asarray(rate) > 0, np.minimum(h, 1.5 / np.maximum(rate, 1e-300)), h)
     elif scene.contact_stiffness > 0:
-        h = min(h, 1.0 / contact_frequency(scene))
-    return h
+        h = np.minimum(h, 1.0 / contact_frequency(scene))
+    return float(h) if np.ndim(h) == 0 else h
 
 
 def initial_state(scene: Scene, drive, ball_angles0=None, ball_speeds0=None,
@@ -312,8 +332,11 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
             dt = default_step(scene, drive_max_speed(drive, t_end), method)
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0 [s] (got {dt})")
-        status, t_fail, bad, work = integ.run(integ.METHOD_IDS[method], s0, t_out, seg_t, seg_d,
-                                              p, b, float(dt), float(rtol), atol_arr, out)
+        # the general kernel: compiled once for every scene (a specialisation per scene pays
+        # off only over many runs: physics.batch)
+        status, t_fail, bad, work = integ.run.generic(
+            integ.METHOD_IDS[method], s0, t_out, seg_t, seg_d, p, b, float(dt), float(rtol),
+            atol_arr, out, b.shape[0], mdl.spec_of(p, seg_d))
         if method in integ.FIXED_STEP:
             # the step actually taken: an output interval is split into equal steps <= dt
             interval = t_out[1] - t_out[0]
@@ -332,7 +355,8 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         raise SimulationError(
             f"simulation of scene {scene.name!r} with {method}"
             f"{f' (dt = {dt:.3g} s)' if dt else ''}: {what} at t = {t_fail:.6g} s; "
-            f"reduce the step, or use 'etdrk4' (stiff drag) or 'ros2' (any stiffness)", t_fail, name)
+            f"reduce the step, or use 'etdrk4' (stiff drag) or 'ros2' (any stiffness)",
+            t_fail, name)
     if is_conservative(scene, drive):
         energy = np.array([mdl.total_energy(s, p, b) for s in out])
         growth = (energy - energy[0]) / max(abs(energy[0]), 1e-300)

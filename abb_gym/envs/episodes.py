@@ -1,0 +1,316 @@
+"""Episodes: what each environment draws, and the rows of many environments reset at once.
+
+An episode is the nominal scene with a drawn primary imbalance and phase, initial ball angles,
+and scaled ball drag and rolling resistance (the preset's ``randomize`` ranges), or the values
+given as reset options.
+
+* :func:`draw` takes one environment's values from its own generator in a fixed order, with
+  one ``rng.random`` call (the numbers ``rng.uniform`` would give one by one: ``low + (high -
+  low) u``), then applies the reset options.
+* :func:`write` resets many rows at once: the packed parameters, the initial state, the drive
+  rows and the bookkeeping of the compiled step, with numpy over the rows plus one compiled
+  call for the stiff rates that set each episode's integration step.  The single environment
+  resets through the same function with one row, so a single environment and a sub-environment
+  of the vector environment stay alike bit for bit.  It reproduces exactly what packing the
+  episode's Scene would give (``tests/test_envs_vector.py`` checks it against
+  :meth:`Episode.scene`).
+* :class:`EpisodeTable` keeps the values of every row; :class:`Episode` is one row's view,
+  whose Scene is built only when asked for (building and validating a Scene costs ~0.3 ms, the
+  reset of a row without it a few microseconds).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..physics import model as mdl
+from ..physics import rotor, runup
+from ..physics.scene import Scene, reference_length
+from ..physics.simulate import default_step, stiff_rates
+from .layout import (S_ACC, S_AOP, S_AREF, S_DTMAX, S_NSEG, S_PEN_RATE, S_PEN_TERM, S_UBEST,
+                     S_USCALE, S_XS, S_YS)
+
+__all__ = ["RESET_OPTIONS", "Episode", "EpisodeTable", "draw", "write", "episode_scene",
+           "packed_rows"]
+
+RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
+                 "ball_drag_scale", "rolling_resistance_scale")
+
+
+def episode_scene(scene: Scene, imbalance: float, drag: float, roll: float) -> Scene:
+    """The nominal ``scene`` with primary imbalance ``imbalance`` [kg m] (through the rotor
+    eccentricity) and ball drag and rolling resistance scaled by ``drag`` and ``roll``."""
+    changes: dict[str, Any] = {}
+    if imbalance != scene.imbalance:
+        changes["rotor_eccentricity"] = imbalance / scene.rotor_mass
+    if drag != 1.0:
+        changes["ball_drag"] = [v * drag for v in scene.ball_drag]
+    if roll != 1.0:
+        changes["ball_rolling_resistance"] = [v * roll for v in scene.ball_rolling_resistance]
+    return scene.replace(**changes) if changes else scene
+
+
+@dataclass
+class Episode:
+    """Parameters of one episode: imbalance [kg m] and its phase [rad], initial ball angles
+    [rad], ball drag and rolling-resistance scales [-], the integration step bound [s] and the
+    rotor's rest position (static sag) [m]."""
+
+    nominal: Scene
+    imbalance: float
+    imbalance_phase: float
+    ball_angles: np.ndarray
+    ball_drag_scale: float
+    rolling_resistance_scale: float
+    integration_step: float
+    static_deflection: tuple[float, float] = (0.0, 0.0)
+
+    @cached_property
+    def scene(self) -> Scene:
+        """The episode as a Scene (built on first use)."""
+        return episode_scene(self.nominal, self.imbalance, self.ball_drag_scale,
+                             self.rolling_resistance_scale)
+
+    def as_info(self) -> dict[str, Any]:
+        return {"imbalance": self.imbalance, "imbalance_phase": self.imbalance_phase,
+                "initial_ball_angles": self.ball_angles.copy(),
+                "ball_drag_scale": self.ball_drag_scale,
+                "rolling_resistance_scale": self.rolling_resistance_scale,
+                "integration_step": self.integration_step,
+                "static_deflection": np.array(self.static_deflection)}
+
+
+class EpisodeTable:
+    """The current episode of every row (arrays over rows; :meth:`episode` gives one)."""
+
+    def __init__(self, scene: Scene, n: int):
+        nb = scene.ball_count
+        self.scene = scene
+        self.started = np.zeros(n, dtype=bool)
+        self.imbalance = np.full(n, scene.imbalance)
+        self.imbalance_phase = np.zeros(n)
+        self.ball_angles = np.zeros((n, nb))
+        self.ball_drag_scale = np.ones(n)
+        self.rolling_resistance_scale = np.ones(n)
+        self.integration_step = np.zeros(n)
+        self.reference_length = np.full(n, scene.reference_length)
+        self.static_deflection = rotor.static_deflection(scene)
+
+    def episode(self, i: int) -> Episode | None:
+        """Row ``i``'s episode (None before its first reset)."""
+        if not self.started[i]:
+            return None
+        return Episode(self.scene, float(self.imbalance[i]), float(self.imbalance_phase[i]),
+                       self.ball_angles[i].copy(), float(self.ball_drag_scale[i]),
+                       float(self.rolling_resistance_scale[i]), float(self.integration_step[i]),
+                       self.static_deflection)
+
+    def info(self, rows) -> dict[str, np.ndarray]:
+        """The episode parameters of ``rows`` as arrays over all rows (0 elsewhere): the keys
+        of :meth:`Episode.as_info`."""
+        rows = np.asarray(rows, dtype=np.int64)
+        n = self.imbalance.shape[0]
+        out: dict[str, np.ndarray] = {}
+        for key, values in (("imbalance", self.imbalance),
+                            ("imbalance_phase", self.imbalance_phase),
+                            ("initial_ball_angles", self.ball_angles),
+                            ("ball_drag_scale", self.ball_drag_scale),
+                            ("rolling_resistance_scale", self.rolling_resistance_scale),
+                            ("integration_step", self.integration_step)):
+            arr = np.zeros_like(values)
+            arr[rows] = values[rows]
+            out[key] = arr
+        sag = np.zeros((n, 2))
+        sag[rows] = self.static_deflection
+        out["static_deflection"] = sag
+        return out
+
+
+def _opt_number(name: str, value: Any, lo: float | None, unit: str, inclusive: bool = True
+                ) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"reset option {name!r} must be a number [{unit}] (got {value!r})"
+                         ) from None
+    if not math.isfinite(v) or (lo is not None and (v < lo or (v == lo and not inclusive))):
+        rng = "finite" if lo is None else f"{'>=' if inclusive else '>'} {lo:g}"
+        raise ValueError(f"reset option {name!r} must be {rng} [{unit}] (got {value!r})")
+    return v
+
+
+def _uniform(lo_hi: Sequence[float], u):
+    lo, hi = float(lo_hi[0]), float(lo_hi[1])
+    return lo + (hi - lo) * u
+
+
+def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
+         ) -> tuple[float, float, np.ndarray, float, float]:
+    """One environment's episode values ``(imbalance, phase, ball angles, drag scale, rolling
+    resistance scale)``: the preset's random draws from ``rng`` (imbalance ratio, phase, ball
+    angles, drag scale, rolling-resistance scale: those that are randomised, in this order),
+    then ``options`` (:data:`RESET_OPTIONS`) in their place."""
+    sc = setup.scene
+    rz = setup.config.randomize
+    nb = sc.ball_count
+    cap = sc.balancing_capacity
+    imbalance = sc.imbalance
+    phase = 0.0
+    angles = np.asarray(sc.ball_angles0, dtype=float).copy()
+    drag = 1.0
+    roll = 1.0
+    count = sum(1 for r in (rz.imbalance_ratio, rz.imbalance_phase, rz.ball_drag_scale,
+                            rz.rolling_resistance_scale) if r is not None)
+    count += nb if rz.ball_angles is not None else 0
+    if count:
+        u = rng.random(count)
+        k = 0
+        if rz.imbalance_ratio is not None:
+            imbalance = float(_uniform(rz.imbalance_ratio, u[k])) * cap
+            k += 1
+        if rz.imbalance_phase is not None:
+            phase = float(_uniform(rz.imbalance_phase, u[k]))
+            k += 1
+        if rz.ball_angles is not None:
+            angles = _uniform(rz.ball_angles, u[k:k + nb])
+            k += nb
+        if rz.ball_drag_scale is not None:
+            drag = float(_uniform(rz.ball_drag_scale, u[k]))
+            k += 1
+        if rz.rolling_resistance_scale is not None:
+            roll = float(_uniform(rz.rolling_resistance_scale, u[k]))
+    if options:
+        if not isinstance(options, Mapping):
+            raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)}"
+                             f" (got {options!r})")
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
+                             f"{list(RESET_OPTIONS)}")
+        if "imbalance" in options and "imbalance_ratio" in options:
+            raise ValueError("reset options 'imbalance' and 'imbalance_ratio' exclude each other")
+        if "imbalance" in options:
+            imbalance = _opt_number("imbalance", options["imbalance"], 0.0, "kg m")
+        if "imbalance_ratio" in options:
+            imbalance = _opt_number("imbalance_ratio", options["imbalance_ratio"], 0.0,
+                                    "-") * cap
+        if "imbalance_phase" in options:
+            phase = _opt_number("imbalance_phase", options["imbalance_phase"], None, "rad")
+        if "ball_angles" in options:
+            a = np.asarray(options["ball_angles"], dtype=float)
+            if a.ndim == 0:
+                a = np.full(nb, float(a))
+            if a.shape != (nb,) or not np.all(np.isfinite(a)):
+                raise ValueError(f"reset option 'ball_angles' must be {nb} finite angles [rad] "
+                                 f"(got {options['ball_angles']!r})")
+            angles = a.copy()
+        if "ball_drag_scale" in options:
+            drag = _opt_number("ball_drag_scale", options["ball_drag_scale"], 0.0, "-",
+                               inclusive=False)
+        if "rolling_resistance_scale" in options:
+            roll = _opt_number("rolling_resistance_scale", options["rolling_resistance_scale"],
+                               0.0, "-")
+    return float(imbalance), float(phase), angles, float(drag), float(roll)
+
+
+def rotor_eccentricity(scene: Scene, imbalance: np.ndarray) -> np.ndarray:
+    """The episodes' rotor eccentricity [m] (:func:`episode_scene`: the nominal one where the
+    imbalance is the nominal one)."""
+    return np.where(imbalance != scene.imbalance, imbalance / scene.rotor_mass,
+                    scene.rotor_eccentricity)
+
+
+def packed_rows(scene: Scene, imbalance: np.ndarray, drag: np.ndarray, roll: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(p, b) of the episodes' scenes, (R, N_PARAMS) and (R, n, N_BALL_PARAMS): what
+    ``model.pack_parameters(episode_scene(scene, imbalance[r], drag[r], roll[r]))`` gives, bit
+    for bit, without building the scenes (the few entries an episode changes are computed
+    the way the Scene and :func:`model.pack_parameters` compute them)."""
+    p0, b0 = mdl.pack_parameters(scene)
+    r = imbalance.shape[0]
+    p = np.repeat(p0[None], r, axis=0)
+    b = np.repeat(b0[None], r, axis=0)
+    p[:, mdl.P_U0] = scene.rotor_mass * rotor_eccentricity(scene, imbalance)  # Scene.imbalance
+    a = scene.arrays()
+    scaled = drag != 1.0
+    b[scaled, :, mdl.B_BETA] = (a["ball_drag"][None, :] * drag[scaled, None]
+                                * scene.race_radius ** 2)
+    scaled = roll != 1.0
+    rr = a["ball_rolling_resistance"][None, :] * roll[scaled, None]
+    b[scaled, :, mdl.B_MUR] = rr / a["ball_radius"]
+    p[scaled, mdl.P_ROLL] = np.where((rr > 0).any(axis=1), 1.0, 0.0)  # Scene.effects
+    return p, b
+
+
+def write(setup: Any, bufs: Any, table: EpisodeTable, rows, imbalance, phase, angles, drag,
+          roll) -> None:
+    """Reset ``rows`` of ``bufs`` to the start of their episodes (rotor at rest): the values
+    are arrays over ``rows`` (``angles``: (R, n)); ``table`` keeps them."""
+    sc = setup.scene
+    nb = sc.ball_count
+    nq = 3 + nb
+    rows = np.asarray(rows, dtype=np.int64)
+    imbalance = np.asarray(imbalance, float)
+    phase = np.asarray(phase, float)
+    angles = np.asarray(angles, float).reshape(len(rows), nb)
+    drag = np.asarray(drag, float)
+    roll = np.asarray(roll, float)
+    p, b = packed_rows(sc, imbalance, drag, roll)
+    bufs.p[rows] = p
+    bufs.b[rows] = b
+    step = setup.config.integration_step
+    if step is None:
+        rate = (stiff_rates(p, b, setup.max_speed) if setup.config.integrator == "rk4"
+                else None)
+        step = default_step(sc, setup.max_speed, setup.config.integrator,
+                            rate=rate if rate is not None else np.zeros(len(rows)))
+    step = np.broadcast_to(np.asarray(step, float), (len(rows),))
+    xs, ys = table.static_deflection
+    s = np.zeros((len(rows), 2 * nq))
+    s[:, 0] = xs
+    s[:, 1] = ys
+    s[:, 2] = phase
+    s[:, 3:nq] = angles
+    bufs.s[rows] = s
+    u0 = p[:, mdl.P_U0]
+    u_ref = rotor.imbalance_scale(sc, u0)
+    a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed, u_ref)
+    st = np.zeros((len(rows), bufs.st.shape[1]))
+    acc = np.zeros(runup.N_ACC)
+    runup.reset(acc)
+    st[:, S_ACC:S_ACC + runup.N_ACC] = acc
+    st[:, S_XS] = xs
+    st[:, S_YS] = ys
+    st[:, S_AREF] = a_peak
+    st[:, S_AOP] = a_op
+    st[:, S_USCALE] = u_ref
+    st[:, S_UBEST] = rotor.best_residual(sc, u0)
+    st[:, S_DTMAX] = step
+    st[:, S_NSEG] = 1.0
+    w = setup.config.reward
+    clear = sc.housing_clearance
+    st[:, S_PEN_RATE] = w.vibration * clear / a_peak + w.time + w.effort * setup.effort_bound
+    st[:, S_PEN_TERM] = w.residual * clear / a_op
+    bufs.st[rows] = st
+    d = np.zeros((len(rows),) + bufs.d.shape[1:])
+    setup.actions.reset_rows(d, phase, setup)
+    bufs.d[rows] = d
+    bufs.act[rows] = 0.0
+    extra = mdl.spec_of(p, d) & ~setup.spec
+    if extra:
+        raise RuntimeError(f"episodes of scene {sc.name!r} need kernel effects {extra} beyond "
+                           f"the environment's {setup.spec}")
+    table.started[rows] = True
+    table.imbalance[rows] = imbalance
+    table.imbalance_phase[rows] = phase
+    table.ball_angles[rows] = angles
+    table.ball_drag_scale[rows] = drag
+    table.rolling_resistance_scale[rows] = roll
+    table.integration_step[rows] = step
+    table.reference_length[rows] = reference_length(rotor_eccentricity(sc, imbalance),
+                                                    sc.race_eccentricity,
+                                                    sc.balancing_capacity, sc.total_mass)

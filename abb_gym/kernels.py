@@ -1,0 +1,112 @@
+"""Compiled kernels ahead of time: ``abb-gym build-kernels`` and the caches in the wheel.
+
+numba compiles every kernel on its first call (the general kernels of ``simulate`` and the
+environments take 20-50 s each, a kernel specialised on a scene as long) and keeps the result
+in its on-disk cache next to the sources (``__pycache__``), keyed by the content of the source
+file and by the CPU.  :func:`build` makes those calls once, in one go and with a progress
+bar, so that the caches hold:
+
+* the general kernels: ``simulate`` with every compiled method, the single environment, the
+  native vector environment and batch simulation (one compilation serves every scene and
+  every action type);
+* the vectorised kernels specialised on the default scene (``yoshida_odd``) for the
+  speed-profile and torque actions (the vector environments of the training configurations).
+
+The wheel ships these caches (``make wheel`` runs :func:`build` first), so a fresh install on
+a machine of the same CPU type starts without compiling; on another CPU, or for another
+scene's vectorised kernel, numba compiles on first use and says so on stderr while it runs
+(:func:`abb_gym.physics.specialise.compile_notice`).  A site-packages folder that is not
+writable keeps the shipped caches but stores new ones in numba's per-user cache.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+__all__ = ["build", "warm_up_steps"]
+
+
+def _simulate():
+    from .physics import MotorDrive, SpeedProfile, simulate
+    for method in ("rk4", "etdrk4", "dopri5", "ros2"):
+        simulate("yoshida_odd", SpeedProfile.ramp(40.0, 130.0), 0.01, method=method)
+    simulate("yoshida_odd", MotorDrive.constant_torque(0.1), 0.01)
+
+
+def _env(kind: str) -> Callable[[], None]:
+    def run():
+        import gymnasium as gym
+        from . import envs  # noqa: F401  (registers the ids)
+        env = gym.make(kind)
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+    return run
+
+
+def _vector(kind: str, kernel: str, num_envs: int) -> Callable[[], None]:
+    def run():
+        import gymnasium as gym
+        from . import envs  # noqa: F401
+        env = gym.make_vec(kind, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                           kernel=kernel)
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+    return run
+
+
+def _batch():
+    import numpy as np
+    from .physics import SpeedProfile, batch, load_scene
+    from .physics import model as mdl
+    from .physics.simulate import default_step, initial_state
+    scene = load_scene("yoshida_odd")
+    drive = SpeedProfile.ramp(40.0, 130.0)
+    _, rows = drive.segment_table(1.0, scene)
+    p, b = mdl.pack_parameters(scene)
+    n = 2
+    s0 = np.repeat(initial_state(scene, drive)[None], n, axis=0)
+    out = np.empty((n, 2, s0.shape[1]))
+    batch.run_batch(s0, np.array([0.0, 0.01]), np.repeat(rows[None], n, axis=0),
+                    np.full(n, len(rows)), np.repeat(p[None], n, axis=0),
+                    np.repeat(b[None], n, axis=0), default_step(scene, 130.0), out,
+                    np.zeros((n, 4)))
+
+
+def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
+    """The calls :func:`build` makes, with a label each."""
+    speed, torque, dwell = ("abb_gym/RunUpSpeed-v0", "abb_gym/RunUpTorque-v0",
+                            "abb_gym/DwellProfile-v0")
+    return [
+        ("simulate (general kernel, every method)", _simulate),
+        ("single environment (general kernel)", _env(speed)),
+        ("single environment, torque and dwell", lambda: (_env(torque)(), _env(dwell)())),
+        ("vector environment (general kernel)", _vector(speed, "generic", 4)),
+        ("batch simulation (general kernel)", _batch),
+        ("vector environment, yoshida_odd speed (vectorised)", _vector(speed, "vectorised", 32)),
+        ("vector environment, yoshida_odd torque (vectorised)",
+         _vector(torque, "vectorised", 32)),
+    ]
+
+
+def build(progress: bool = True) -> list[tuple[str, float]]:
+    """Compile (or load) every kernel of :func:`warm_up_steps` into numba's cache; returns
+    ``(label, seconds)`` per step."""
+    import os
+    from tqdm import tqdm
+    quiet = os.environ.get("ABB_GYM_QUIET")
+    os.environ["ABB_GYM_QUIET"] = "1"  # the bar says what is compiling
+    done = []
+    try:
+        bar = tqdm(warm_up_steps(), desc="abb-gym kernels", unit="kernel",
+                   disable=not progress)
+        for label, call in bar:
+            bar.set_postfix_str(label)
+            start = time.perf_counter()
+            call()
+            done.append((label, time.perf_counter() - start))
+    finally:
+        if quiet is None:
+            os.environ.pop("ABB_GYM_QUIET", None)
+        else:
+            os.environ["ABB_GYM_QUIET"] = quiet
+    return done

@@ -1,0 +1,133 @@
+"""Compiled functions specialised on some arguments' values, called without dispatch cost.
+
+The kernels are written once and compiled for each combination of a few small integers (the
+integration method, the ball count, the kernel's ``SPEC_*`` effect bits), so that the compiler
+sees them as constants: dead terms vanish and the lane loops vectorise.  numba offers
+``numba.literally`` for this, but a call from Python then re-runs type inference every time
+(about 5 ms per call, measured), which the environments' step cannot afford.
+
+:class:`Specialised` instead compiles (or loads from numba's cache) the signature with those
+arguments typed as literals once per combination, keeps the compiled entry point, and calls it
+directly afterwards: a dictionary lookup plus the usual unboxing of the arguments.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from contextlib import contextmanager
+
+import numpy as np
+from numba import typeof, types
+
+__all__ = ["Specialised", "compile_notice", "resolve_kernel", "KERNELS"]
+
+KERNELS = ("auto", "generic", "vectorised")
+VECTORISE_FROM = 8  # lanes per block from which "auto" picks the vectorised kernel
+
+
+def resolve_kernel(kernel: str | None, lanes: int) -> str:
+    """The kernel a batch of ``lanes`` lanes per block runs: ``kernel`` (default:
+    ``$ABB_GYM_KERNEL``, else "auto"), where "auto" is the vectorised kernel (specialised on
+    the scene's ball count and effects, compiled once per pair) from ``VECTORISE_FROM`` lanes
+    per block, and the general one (compiled once for every scene) below."""
+    kernel = kernel or os.environ.get("ABB_GYM_KERNEL") or "auto"
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r}; from "
+                         f"ABB_GYM_KERNEL if not passed)")
+    if kernel == "auto":
+        kernel = "vectorised" if lanes >= VECTORISE_FROM else "generic"
+    return kernel
+
+log = logging.getLogger(__name__)
+NOTICE_AFTER = 1.0  # [s] a compilation that takes longer than this is announced
+
+
+@contextmanager
+def compile_notice(what: str, after: float = NOTICE_AFTER):
+    """Announce on stderr a compilation that is still running after ``after`` seconds, and
+    its duration when it ends (silenced by ``ABB_GYM_QUIET=1``): nothing hangs without a word.
+    Loading a cached kernel takes well under a second and stays silent."""
+    if os.environ.get("ABB_GYM_QUIET"):
+        yield
+        return
+    start = time.perf_counter()
+    announced = threading.Event()
+
+    def announce():
+        announced.set()
+        sys.stderr.write(f"abb-gym: compiling {what} (once; cached on disk afterwards) ...\n")
+        sys.stderr.flush()
+
+    timer = threading.Timer(after, announce)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        if announced.is_set():
+            sys.stderr.write(f"abb-gym: compiled {what} in {time.perf_counter() - start:.0f} s\n")
+            sys.stderr.flush()
+
+
+class Specialised:
+    """Call ``dispatcher`` (an ``njit`` function) with the arguments at ``literal`` positions
+    compiled in as constants.
+
+    The compiled entry point is kept per combination of those values and of the other
+    arguments' types (dtype, dimensions, layout and writeability of arrays), so a call with
+    new types compiles a new entry as numba's own dispatch would.  Hot loops that call with
+    the same arrays every time can fetch the entry point once with :meth:`entry`.
+    """
+
+    def __init__(self, dispatcher, literal: Sequence[int], names: Sequence[str] = ()):
+        self.dispatcher = dispatcher
+        self.literal = tuple(literal)
+        self.names = dict(zip(self.literal, names))
+        self._entries: dict[tuple, object] = {}
+        self.__doc__ = dispatcher.__doc__
+        self.__name__ = getattr(dispatcher, "__name__", "specialised")
+
+    def _key(self, args) -> tuple:
+        # the literal values plus what numba's type of each argument depends on: an entry point
+        # trusts its argument types (a non-contiguous array passed to a contiguous signature
+        # would be read as contiguous), so every type gets its own entry
+        return tuple(int(args[i]) for i in self.literal) + tuple(
+            (a.dtype.char, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous, a.flags.writeable)
+            if isinstance(a, np.ndarray) else type(a) for a in args)
+
+    def entry(self, *args, generic: bool = False):
+        """The compiled entry point for these arguments (compiled or loaded on first use);
+        ``generic``: the general kernel's entry point (the literal arguments typed as plain
+        integers).  Long compilations say so on stderr while they run."""
+        key = self._key(args) + (generic,)
+        fn = self._entries.get(key)
+        if fn is None:
+            sig = tuple(typeof(a) if generic or i not in self.literal else types.literal(int(a))
+                        for i, a in enumerate(args))
+            what = ("the general kernel" if generic else
+                    "a kernel for " + ", ".join(f"{self.names.get(i, f'argument {i}')} = {args[i]}"
+                                                for i in self.literal))
+            with compile_notice(f"{self.__name__}: {what}"):
+                fn = self.dispatcher.compile(sig)
+            self._entries[key] = fn
+        return fn
+
+    def __call__(self, *args):
+        fn = self._entries.get(self._key(args) + (False,))
+        if fn is None:
+            fn = self.entry(*args)
+        return fn(*args)
+
+    def generic(self, *args):
+        """Call the general kernel: the same code compiled once for run-time values of the
+        literal arguments (no vector instructions across lanes, but no compilation per
+        combination either)."""
+        fn = self._entries.get(self._key(args) + (True,))
+        if fn is None:
+            fn = self.entry(*args, generic=True)
+        return fn(*args)

@@ -1,0 +1,65 @@
+"""Episodes are drawn one environment at a time and written many rows at once
+(:mod:`abb_gym.envs.episodes`); the vectorised write must equal packing each episode's Scene."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import abb_gym
+from abb_gym.envs import episodes
+from abb_gym.envs.setup import EnvSetup
+from abb_gym.physics import model as mdl
+from abb_gym.physics.simulate import default_step
+
+
+def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():
+    """draw() takes all of an episode's numbers with one rng.random call; they must be the
+    numbers (and the bits) of the rng.uniform calls it replaced, so seeded episodes stay."""
+    ranges = [(0.2, 0.9), (-np.pi, np.pi), (0.5, 1.5)]
+    a = np.random.default_rng(11)
+    b = np.random.default_rng(11)
+    one_by_one = [a.uniform(lo, hi) for lo, hi in ranges] + list(a.uniform(-3.0, 3.0, size=4))
+    u = b.random(len(ranges) + 4)
+    batched = ([episodes._uniform(r, u[k]) for k, r in enumerate(ranges)]
+               + list(episodes._uniform((-3.0, 3.0), u[3:])))
+    assert np.array_equal(one_by_one, batched)
+
+
+@pytest.mark.parametrize("scene", ["yoshida_odd", "washer", "yoshida_odd5"])
+def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
+    setup = EnvSetup("speed", scene, "train")
+    sc = setup.scene
+    rng = np.random.default_rng(3)
+    n = 7
+    imbalance = rng.uniform(0.1, 0.9, n) * sc.balancing_capacity
+    imbalance[2] = sc.imbalance  # the nominal imbalance keeps the nominal eccentricity
+    drag = rng.uniform(0.5, 1.5, n)
+    drag[3] = 1.0
+    roll = rng.uniform(0.0, 2.0, n)
+    roll[4] = 0.0  # no rolling resistance at all: the effect goes away
+    roll[5] = 1.0
+    p, b = episodes.packed_rows(sc, imbalance, drag, roll)
+    for r in range(n):
+        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r])
+        p_ref, b_ref = mdl.pack_parameters(ep_scene)
+        assert np.array_equal(p[r], p_ref), r
+        assert np.array_equal(b[r], b_ref), r
+        assert ep_scene.reference_length == episodes.reference_length(
+            episodes.rotor_eccentricity(sc, imbalance[r:r + 1]), sc.race_eccentricity,
+            sc.balancing_capacity, sc.total_mass)[0]
+    rates = episodes.stiff_rates(p, b, setup.max_speed)
+    steps = default_step(sc, setup.max_speed, "rk4", rate=rates)
+    for r in range(n):
+        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r])
+        assert steps[r] == default_step(ep_scene, setup.max_speed, "rk4")
+
+
+def test_reset_options_are_checked_by_name():
+    setup = EnvSetup("speed", "yoshida_odd", "train")
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="unknown reset option"):
+        episodes.draw(setup, rng, {"imbalence": 1.0})
+    with pytest.raises(ValueError, match="'ball_drag_scale' must be > 0"):
+        episodes.draw(setup, rng, {"ball_drag_scale": 0.0})
+    with pytest.raises(ValueError, match="'ball_angles' must be 2 finite"):
+        episodes.draw(setup, rng, {"ball_angles": [0.0, np.nan]})
