@@ -82,9 +82,9 @@ def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
         ("single environment, torque and dwell", lambda: (_env(torque)(), _env(dwell)())),
         ("vector environment (general kernel)", _vector(speed, "generic", 4)),
         ("batch simulation (general kernel)", _batch),
-        ("vector environment, yoshida_odd speed (vectorised)", _vector(speed, "vectorised", 32)),
+        ("vector environment, yoshida_odd speed (vectorised)", _vector(speed, "specialised", 32)),
         ("vector environment, yoshida_odd torque (vectorised)",
-         _vector(torque, "vectorised", 32)),
+         _vector(torque, "specialised", 32)),
     ]
 
 

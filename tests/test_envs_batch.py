@@ -14,7 +14,7 @@ from abb_gym.physics.simulate import default_step, initial_state
 @pytest.mark.parametrize("scene_name, kernel", [
     ("yoshida_odd", "generic"), ("lu_hung_odd3", "generic"), ("spannan_discoidal", "generic"),
     # one vectorised case: each specialisation compiles for about a minute
-    ("yoshida_odd", "vectorised")])
+    ("yoshida_odd", "specialised")])
 def test_run_batch_equals_rk4_run(scene_name, kernel):
     base = abb_gym.load_scene(scene_name)
     w = base.drive_operating_speed
@@ -28,7 +28,7 @@ def test_run_batch_equals_rk4_run(scene_name, kernel):
          abb_gym.MotorDrive.constant_torque(0.5 * base.drive_torque_limit)),
         (base, abb_gym.MotorDrive.limited_power(1e-3, abb_gym.SpeedProfile.ramp(a / 2, w))),
     ]
-    if kernel == "vectorised":
+    if kernel == "specialised":
         cases = cases[:2]  # the prescribed-rotor group only: one specialisation to compile
     t_end = 1.2 * crit / (a / 2)
     t_out = np.linspace(0.0, t_end, 61)

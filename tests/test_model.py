@@ -349,6 +349,16 @@ def test_specialised_kernel_equals_the_general_one(name, motor):
     assert np.array_equal(runs[0], runs[1])
 
 
+def test_simulate_with_the_specialised_kernel_gives_the_same_trajectory():
+    scene = load_scene("yoshida_odd")
+    prof = SpeedProfile.dwell(40.0, scene.critical_speed, 0.3)
+    general = simulate(scene, prof, 1.0, output_dt=0.01)
+    special = simulate(scene, prof, 1.0, output_dt=0.01, kernel="specialised")
+    assert np.array_equal(general.states, special.states)
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        simulate(scene, prof, 1.0, kernel="fast")
+
+
 def test_drive_classes_evaluate_the_kernel_drive_law():
     """SpeedProfile and MotorDrive evaluate speeds and torques with the kernel's own drive law
     (one implementation), and that law is the documented one."""

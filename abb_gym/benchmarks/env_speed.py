@@ -155,7 +155,7 @@ def measure(scipy_rate: float, quick: bool = False) -> list[dict]:
     bar = tqdm(total=len(VECTOR_SIZES) + 5, desc="bench speed (environments)", leave=False)
     vec = {}
     for n in VECTOR_SIZES:
-        vec[n] = vector_rate(n, steps[n], "vectorised", repeats=repeats)
+        vec[n] = vector_rate(n, steps[n], "specialised", repeats=repeats)
         bar.update()
     generic = vector_rate(1024, steps[1024], "generic", repeats=repeats)
     bar.update()
@@ -169,7 +169,7 @@ def measure(scipy_rate: float, quick: bool = False) -> list[dict]:
     bar.update()
     bar.close()
     note = f"{SCENE}, rk4 at the default step, random actions, {EPISODE_STEPS}-step episodes"
-    rows = [{"measurement": f"native vector environment, {n} sub-environments (vectorised "
+    rows = [{"measurement": f"native vector environment, {n} sub-environments (specialised "
                             f"kernel), resets included",
              "value": f"{vec[n]['rate']:,.0f} env-steps/s",
              "target": ">= 2,500,000" if n == 1024 else "-",
@@ -177,7 +177,7 @@ def measure(scipy_rate: float, quick: bool = False) -> list[dict]:
             for n in VECTOR_SIZES]
     rows.append({"measurement": "the same at 1024 with the general kernel (kernel='generic')",
                  "value": f"{generic['rate']:,.0f} env-steps/s", "target": "-",
-                 "note": f"vectorised/general = {vec[1024]['rate'] / generic['rate']:.2f}x"})
+                 "note": f"specialised/general = {vec[1024]['rate'] / generic['rate']:.2f}x"})
     rows.append({"measurement": "Gymnasium CartPoleVectorEnv, 1024 sub-environments (peer)",
                  "value": f"{cp_vec:,.0f} env-steps/s", "target": "-",
                  "note": f"abb-gym costs {cp_vec / vec[1024]['rate']:.1f}x CartPole's per "

@@ -139,7 +139,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
 
     @property
     def kernel(self) -> str:
-        """The compiled step in use: "vectorised" (specialised on the scene's ball count and
+        """The compiled step in use: "specialised" (specialised on the scene's ball count and
         effects, vector instructions across sub-environments) or "generic"."""
         return self._bufs.kernel
 

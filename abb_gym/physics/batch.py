@@ -306,7 +306,7 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.ME
     as ``integrators.run`` returns them.  ``order`` (default :func:`lane_order` of ``dt_max``)
     assigns environments to lanes; ``lanes`` per block defaults to :func:`lanes_per_block`.
     Environments are run in two groups, prescribed rotor and motor drive; ``kernel``
-    (:func:`~abb_gym.physics.specialise.resolve_kernel`: "auto", "generic" or "vectorised")
+    (:func:`~abb_gym.physics.specialise.resolve_kernel`: "auto", "generic" or "specialised")
     says whether a group runs the general kernel or one specialised on the union of its
     environments' effects (an effect a lane does not have contributes exactly zero there).
     Both give the same result bit for bit.
@@ -329,6 +329,6 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.ME
         spec = 0
         for e in group:
             spec |= mdl.spec_of(p[e], seg_d[e, :max(int(nseg[e]), 1)])
-        call = (_run_batch_specialised if resolve_kernel(kernel, group_lanes) == "vectorised"
+        call = (_run_batch_specialised if resolve_kernel(kernel, group_lanes) == "specialised"
                 else _run_batch_specialised.generic)
         call(*args, group, group_lanes, int(method), nb, spec)

@@ -25,21 +25,22 @@ from numba import typeof, types
 
 __all__ = ["Specialised", "compile_notice", "resolve_kernel", "KERNELS"]
 
-KERNELS = ("auto", "generic", "vectorised")
+KERNELS = ("auto", "generic", "specialised")
 VECTORISE_FROM = 8  # lanes per block from which "auto" picks the vectorised kernel
 
 
 def resolve_kernel(kernel: str | None, lanes: int) -> str:
     """The kernel a batch of ``lanes`` lanes per block runs: ``kernel`` (default:
-    ``$ABB_GYM_KERNEL``, else "auto"), where "auto" is the vectorised kernel (specialised on
-    the scene's ball count and effects, compiled once per pair) from ``VECTORISE_FROM`` lanes
-    per block, and the general one (compiled once for every scene) below."""
+    ``$ABB_GYM_KERNEL``, else "auto").  "specialised" is compiled for the scene's ball count
+    and effects (once per pair, 20-60 s; it vectorises across lanes and runs fastest),
+    "generic" is compiled once for every scene; "auto" picks the specialised kernel from
+    ``VECTORISE_FROM`` lanes per block on, where its compilation pays off."""
     kernel = kernel or os.environ.get("ABB_GYM_KERNEL") or "auto"
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r}; from "
                          f"ABB_GYM_KERNEL if not passed)")
     if kernel == "auto":
-        kernel = "vectorised" if lanes >= VECTORISE_FROM else "generic"
+        kernel = "specialised" if lanes >= VECTORISE_FROM else "generic"
     return kernel
 
 log = logging.getLogger(__name__)
