@@ -1,7 +1,13 @@
-"""The command line: simulate writes a table, JSON and a PNG; bad input exits 2 with one line."""
+"""The command line: simulate writes a table, JSON and a PNG; bad input exits 2 with one line,
+a failed simulation exits 1 with one line, output paths are checked before computing, and a
+closed stdout ends the command quietly."""
+import io
 import json
+import subprocess
+import sys
 
 import numpy as np
+import pytest
 
 from abb_gym.cli import main
 
@@ -41,3 +47,103 @@ def test_demo_writes_figures(tmp_path, capsys):
     assert len(list(tmp_path.glob("*.png"))) == 2
     out = capsys.readouterr().out
     assert "dwell 2.5-3.0 s" in out and "peak W_r/e" in out
+
+
+# ---------------------------------------------------------------- failures are one line
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_simulation_error_is_one_line_and_exit_1(capsys, monkeypatch):
+    from abb_gym import SimulationError
+
+    def diverge(*args, **kwargs):
+        raise SimulationError("the state became non-finite in 'x' at t = 0.004 s", 0.004, "x")
+
+    monkeypatch.setattr("abb_gym.cli.simulate.simulate", diverge)
+    assert main(["simulate", "--t-end", "0.2"]) == 1
+    assert "non-finite in 'x'" in _one_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("argv", [
+    ["--set", "ball_drag=1e30", "--t-end", "0.2"],
+    ["--set", "support_stiffness_x=1e30", "--t-end", "0.2"],
+    ["--set", "support_stiffness_x=1e12", "--t-end", "0.2"],
+    ["--t-end", "1e30"],
+])
+def test_diverging_or_out_of_range_runs_are_one_line(argv, capsys):
+    # out-of-range fields are bad input (2); a run the integrator cannot follow fails (1)
+    assert main(["simulate", *argv]) in (1, 2)
+    assert _one_line(capsys.readouterr().err).startswith("abb-gym simulate: error: ")
+
+
+def test_json_into_a_missing_folder_creates_it(tmp_path):
+    path = tmp_path / "new" / "deeper" / "run.json"
+    assert main(["simulate", "--t-end", "0.05", "--json", str(path)]) == 0
+    assert json.loads(path.read_text())["t"][-1] == pytest.approx(0.05)
+
+
+def _refuse(*args, **kwargs):
+    raise AssertionError("computed before the output path was checked")
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--json", "{file}/run.json"],
+    ["simulate", "--plot", "{file}/sub/run.png"],
+    ["simulate", "--json", "{dir}"],
+    ["evaluate", "--policy", "baseline:ramp", "--out", "{file}/eval"],
+    ["evaluate", "--policy", "baseline:ramp", "--out", "{file}"],
+    ["stability-map", "--out", "{file}/map"],
+    ["study", "settling", "--out", "{file}/study"],
+    ["tune-baselines", "--out", "{file}/tuned"],
+    ["bench", "speed", "--out", "{file}/bench"],
+    ["bench", "accuracy", "--out", "{file}/bench"],
+    ["demo", "--out", "{file}/demo"],
+])
+def test_output_paths_are_checked_before_computing(argv, tmp_path, capsys, monkeypatch):
+    for target in ("abb_gym.cli.simulate.simulate", "abb_gym.cli.demo.simulate",
+                   "abb_gym.evaluation.evaluate.evaluate", "abb_gym.analysis.stability_map",
+                   "abb_gym.evaluation.studies.settling_study", "abb_gym.baselines.tuner.tune",
+                   "abb_gym.benchmarks.speed.run_speed",
+                   "abb_gym.benchmarks.accuracy.run_accuracy"):
+        monkeypatch.setattr(target, _refuse)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    argv = [a.format(file=blocker, dir=tmp_path) for a in argv]
+    assert main(argv) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "is a file, not a folder" in line or "is a folder; give a file name" in line
+    assert blocker.read_text() == "not a folder"
+
+
+def test_train_output_below_a_file_is_refused_before_training(tmp_path, capsys):
+    pytest.importorskip("stable_baselines3")
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert main(["train", "--config", "runup_speed_yoshida_odd", "--out",
+                 str(blocker / "run")]) == 2
+    assert "is a file, not a folder" in _one_line(capsys.readouterr().err)
+
+
+def test_a_closed_stdout_ends_quietly_in_process(monkeypatch):
+    class Closed(io.StringIO):
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(sys, "stdout", Closed())
+    assert main(["simulate", "--t-end", "0.05", "--json"]) == 141
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    # `abb-gym simulate --json | head -c 10`: ~300 kB of JSON into a pipe closed after 10 bytes
+    proc = subprocess.Popen([sys.executable, "-m", "abb_gym.cli", "simulate", "--json",
+                             "--t-end", "2"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    head = proc.stdout.read(10)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=600) == 141, err
+    assert head == b'{"scene": '
+    assert "Traceback" not in err and "BrokenPipe" not in err and "Exception ignored" not in err

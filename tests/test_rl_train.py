@@ -101,7 +101,7 @@ def test_config_file_errors(tmp_path):
 def test_smoke_run_writes_the_run_folder(smoke_run):
     for name in ("model.zip", "vecnormalize.pkl", "config.yml", "evaluations.csv",
                  "evaluations.npz", "evaluation.json", "best_model.zip",
-                 "best_vecnormalize.pkl"):
+                 "best_vecnormalize.pkl", "agent.yml"):
         assert (smoke_run / name).exists(), name
     assert list((smoke_run / "checkpoints").glob("ppo_*_steps.zip"))
     assert list((smoke_run / "checkpoints").glob("ppo_vecnormalize_*_steps.pkl"))
@@ -117,6 +117,13 @@ def test_smoke_run_writes_the_run_folder(smoke_run):
     assert npz["results"].shape[1] == 4
     # the run's config.yml trains again as it is (zoo style, keyed by the env id)
     assert load_config(smoke_run / "config.yml").n_timesteps == 2048
+    # the manifest fingerprints the final and the best model and statistics
+    manifest = yaml.safe_load((smoke_run / "agent.yml").read_text())
+    assert set(manifest["files"]) == {"model.zip", "vecnormalize.pkl", "best_model.zip",
+                                      "best_vecnormalize.pkl"}
+    assert manifest["env_id"] == SPEED and manifest["scene"] == "yoshida_odd"
+    best = load_policy(smoke_run, best=True)
+    assert best.observation_names == manifest["observation"]["names"]
 
 
 def test_load_policy_freezes_normalisation(smoke_run):

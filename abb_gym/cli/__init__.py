@@ -2,12 +2,19 @@
 
 Each subcommand lives in its own module of this package and defines ``register(subparsers)``,
 which adds its parser and sets ``func`` to the function that runs it.  To add a subcommand,
-write the module and list it in ``SUBCOMMANDS``.
+write the module and list it in ``SUBCOMMANDS``; it checks its output paths before computing
+(:mod:`abb_gym.cli.outputs`).
+
+Failures are one line on stderr, never a traceback: bad input (``ValueError``) exits 2, a
+simulation that cannot continue (:class:`abb_gym.SimulationError`) or a file that cannot be
+written (``OSError``) exits 1.  A reader that closes stdout early (``abb-gym simulate --json |
+head``) ends the command quietly with 141, the status of a process killed by SIGPIPE.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 SUBCOMMANDS = [
@@ -19,6 +26,7 @@ SUBCOMMANDS = [
     "abb_gym.cli.tune",
     "abb_gym.cli.study",
     "abb_gym.cli.train",
+    "abb_gym.cli.kernels",
 ]
 
 
@@ -35,14 +43,50 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by it
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _silence_stdout() -> None:
+    """Point the process's stdout at /dev/null, so that the interpreter's final flush of the
+    unwritable buffer does not raise BrokenPipeError again (Python's documented remedy).
+    Only the real stdout: a replaced sys.stdout (tests, embedding) is left alone."""
+    if sys.stdout is not sys.__stdout__ or sys.stdout is None:
+        return
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from ..physics import SimulationError
     try:
         from .. import resources
         for folder in args.configs:
             resources.add_user_folder(folder)
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        # flush here, inside the try: a closed pipe then surfaces now, not at exit
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except ValueError as exc:  # bad input: one clear line, no traceback
-        print(f"abb-gym {args.command}: error: {exc}", file=sys.stderr)
+        print(f"abb-gym {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except SimulationError as exc:  # valid input the integrator cannot follow
+        print(f"abb-gym {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a disk that fills or a permission lost after the checks
+        where = f" {str(exc.filename)!r}" if exc.filename else ""
+        print(f"abb-gym {args.command}: error: cannot access{where}: "
+              f"{_one_line(exc.strerror or exc)}", file=sys.stderr)
+        return 1

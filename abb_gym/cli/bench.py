@@ -7,6 +7,7 @@ import csv
 from pathlib import Path
 
 from ..tables import markdown_table
+from .outputs import output_folder
 
 
 def register(sub) -> None:
@@ -32,8 +33,7 @@ def _write_csv(rows, path: Path) -> None:
 
 def run_accuracy(args) -> int:
     from ..benchmarks.accuracy import energy_drift, plot_work_precision, run_accuracy as bench
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "--out")
     rows = bench(repeats=args.repeats)
     png = plot_work_precision(rows, out / "work_precision.png")
     _write_csv(rows, out / "work_precision.csv")
@@ -49,8 +49,7 @@ def run_accuracy(args) -> int:
 
 def run_speed(args) -> int:
     from ..benchmarks.speed import run_speed as bench
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "--out")
     rows = bench(quick=args.quick)
     text = markdown_table(rows)
     (out / "speed.md").write_text(text + "\n")

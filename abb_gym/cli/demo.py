@@ -4,8 +4,6 @@ metrics table (with the error of the compiled RK4 against a DOP853 reference) an
 thesis-style PNG figures."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from ..physics import SpeedProfile, load_scene, simulate
@@ -23,7 +21,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..plots import plot_runup_comparison
-    out = Path(args.out)
+    from .outputs import output_folder
+    out = output_folder(args.out, "--out")
     scene = load_scene("yoshida_odd")
     accel = 40.0
     profiles = {

@@ -1,25 +1,32 @@
 """``abb-gym evaluate``: policies against baselines on a fixed, seeded test set.
 
     abb-gym evaluate --env abb_gym/RunUpSpeed-v0 --scene yoshida_odd \\
-        --policy baseline:speed_dwell --policy baseline:speed_reduction --policy ppo:agents/trained/X \\
+        --policy ppo:runup_speed_yoshida_odd --policy replay:ppo:runup_speed_yoshida_odd \\
+        --policy baseline:knots --policy baseline:retry \\
         --episodes 200 --seed 0 --sweep 12 --out out/eval
 
-Writes summary.md (mean [95 % CI] per metric), episodes.csv, evaluation.json, timeseries.png
-(every policy on test episode 0) and pareto.png (run-up time against residual vibration,
-with the baseline families swept over their parameters when --sweep N > 0).
+Policies: ``baseline:NAME`` (a family, tuned parameters when a baselines/<scene>.yaml is on the
+search path), ``ppo:NAME|PATH`` (a trained agent), ``replay:SPEC`` (SPEC recorded on the
+nominal machine and replayed open-loop: with SPEC itself, the report gives SPEC's feedback
+value).  Writes, into --out: summary.md (mean [95 % CI] per metric, feedback values),
+episodes.csv, evaluation.json, timeseries.png (every policy on test episode 0) and pareto.png
+(settled run-up time against residual vibration, the baseline families swept over their
+parameters when --sweep N > 0).
 """
 from __future__ import annotations
+
+import argparse
 
 from ..execution.cli import add_executor_arguments, executor_from_args
 
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="evaluate policies and baselines on a seeded test set",
-                       description=__doc__)
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default="abb_gym/RunUpSpeed-v0", help="environment id")
     p.add_argument("--scene", default="yoshida_odd", help="scene name")
     p.add_argument("--policy", action="append", required=True,
-                   help="baseline:NAME or ppo:PATH (repeatable)")
+                   help="baseline:NAME, ppo:NAME|PATH or replay:SPEC (repeatable)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per policy")
     p.add_argument("--seed", type=int, default=0, help="seed of the test set (episode k: seed + k)")
     p.add_argument("--preset", default="test", help="environment preset of the test set")
@@ -27,7 +34,9 @@ def register(sub) -> None:
                    help="also sweep every baseline family over N parameter sets for the "
                         "Pareto chart (RunUpSpeed)")
     p.add_argument("--sweep-episodes", type=int, default=12, help="episodes per swept point")
-    p.add_argument("--out", default="out/evaluate", help="output folder")
+    p.add_argument("--out", default="out/evaluate",
+                   help="output folder for summary.md, episodes.csv, evaluation.json and the "
+                        "charts (created)")
     add_executor_arguments(p)
     p.set_defaults(func=run)
 
@@ -38,11 +47,26 @@ def _executor(args):
     return executor_from_args(args) if chosen else None  # default: this process, both cores
 
 
+def check_agents(specs: list[str], env_id: str, scene: str) -> None:
+    """Load every ``ppo:`` agent (also inside ``replay:``) once here, so that a bad agent
+    folder is one line before any episode runs, whichever executor runs the episodes."""
+    from ..evaluation.registry import resolve
+    for spec in specs:
+        inner = spec
+        while inner.startswith("replay:"):
+            inner = inner[len("replay:"):]
+        if inner.startswith("ppo:"):
+            resolve(inner, env_id, scene)
+
+
 def run(args) -> int:
     from ..evaluation.evaluate import evaluate
     from ..evaluation.report import summary_table, write_report
+    from .outputs import output_folder
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1 (got {args.episodes})")
+    check_agents(args.policy, args.env, args.scene)
+    output_folder(args.out, "--out")
     ex = _executor(args)
     results = [evaluate(args.env, args.scene, spec, args.episodes, args.seed, args.preset,
                         executor=ex) for spec in args.policy]
@@ -50,7 +74,9 @@ def run(args) -> int:
     if args.sweep > 0:
         from ..baselines.tuner import sweep
         sweep_rows = sweep(args.scene, n=args.sweep, episodes=args.sweep_episodes,
-                           seed=args.seed, preset=args.preset, executor=ex)
+                           seed=args.seed, preset=args.preset, executor=ex,
+                           env_id=args.env if args.env != "abb_gym/DwellProfile-v0"
+                           else "abb_gym/RunUpSpeed-v0")
     paths = write_report(results, args.out, sweep_rows)
     print(summary_table(results))
     print("wrote " + ", ".join(str(p) for p in paths.values()))

@@ -72,8 +72,14 @@ def build_drive(args, scene):
 
 
 def run(args) -> int:
+    from .outputs import output_file
     scene = load_scene(args.scene, **parse_overrides(args.set))
     drive = build_drive(args, scene)
+    # after the inputs (no folders for a rejected command), before the run
+    if args.plot:
+        output_file(args.plot, "--plot")
+    if args.json and args.json != "-":
+        output_file(args.json, "--json")
     angles = None if args.ball_angles_deg is None else np.radians(args.ball_angles_deg)
     tr = simulate(scene, drive, args.t_end, ball_angles0=angles, method=args.method, dt=args.dt,
                   output_dt=args.output_dt)

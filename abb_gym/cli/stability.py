@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from ..analysis import Groups, stability_map
     from ..analysis.groups import GROUP_FIELDS
     from ..physics.scene import load_scene
+    from .outputs import output_file
 
     for label, n in (("--nx", args.nx), ("--ny", args.ny)):
         if n < 1:
@@ -85,6 +86,9 @@ def run(args: argparse.Namespace) -> int:
         if "n_balls" in settings:
             settings["n_balls"] = int(settings["n_balls"])
         base = Groups().replace(**settings) if settings else Groups()
+    # after the inputs (no folders for a rejected command), before any point is computed
+    for suffix in (".csv", ".png"):
+        output_file(f"{args.out}{suffix}", "--out")
     m = stability_map(base, (args.x, np.linspace(*args.x_range, args.nx)),
                       (args.y, np.linspace(*args.y_range, args.ny)), n_balls=args.balls,
                       omega=args.omega, n_members=args.members, executor=executor,

@@ -5,8 +5,6 @@
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..execution.cli import add_executor_arguments
 from ..tables import markdown_table
 from .evaluate import _executor
@@ -24,7 +22,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..evaluation import studies
-    out = Path(args.out)
+    from .outputs import output_folder
+    out = output_folder(args.out, "--out")
     ex = _executor(args)
     if args.which == "settling":
         rows = studies.settling_study(args.scene, executor=ex)
@@ -35,5 +34,5 @@ def run(args) -> int:
     text = markdown_table(rows)
     (out / f"{args.which}.md").write_text(text + "\n")
     print(text)
-    print(f"wrote {png}")
+    print(f"wrote {png} and {png.with_suffix('.csv')}")
     return 0

@@ -14,7 +14,6 @@ wall time and env-steps/s (see :mod:`abb_gym.rl.train`).  Needs the training ext
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -51,6 +50,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None,
                    help="run folder (default runs/<config>/s<seed>-<time>); with --seeds, the "
                         "parent of one s<seed> folder per seed")
+    p.add_argument("--tensorboard-log", "-tb", default=None, metavar="DIR",
+                   help="write TensorBoard event files to DIR (SB3's tensorboard_log)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", "-v", type=int, default=0, choices=[0, 1, 2],
                    help="SB3 verbosity (1 prints the training table and each evaluation)")
@@ -101,10 +102,13 @@ def _report(res) -> None:
 
 def run_from_args(args: argparse.Namespace) -> int:
     from ..rl.train import default_run_dir, seeded_trial, train
+    from .outputs import output_folder
     cfg = config_from_args(args)
+    if args.out:
+        output_folder(args.out, "--out")
     if args.seeds is None:
         res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
-                    verbose=args.verbose)
+                    verbose=args.verbose, tensorboard_log=args.tensorboard_log)
         _report(res)
         return 0
     seeds = list(dict.fromkeys(args.seeds))
@@ -114,7 +118,8 @@ def run_from_args(args: argparse.Namespace) -> int:
         from ..execution.tune import grid, run_trials
         space = {"env_id": cfg.env_id, "hyperparams": cfg.to_mapping(),
                  "settings": cfg.abb_gym_settings(), "source": cfg.source,
-                 "seed": grid(seeds), "run_dir": str(root)}
+                 "seed": grid(seeds), "run_dir": str(root),
+                 "tensorboard_log": args.tensorboard_log}
         trials = run_trials(seeded_trial, space,
                             executor=executor_from_args(args, ray=True, progress=False),
                             metric="return", mode="max", resources_per_trial={"cpu": 2},
@@ -127,7 +132,7 @@ def run_from_args(args: argparse.Namespace) -> int:
                          "other (each run already uses the machine's cores)")
     for s in seeds:
         res = train(cfg, seed=s, run_dir=root / f"s{s}", progress=not args.no_progress,
-                    verbose=args.verbose)
+                    verbose=args.verbose, tensorboard_log=args.tensorboard_log)
         _report(res)
     return 0
 
@@ -135,8 +140,6 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    # before torch and the first parallel environment step load their OpenMP runtimes
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
         import abb_gym.rl.train  # noqa: F401  (fails early without the training extra)
     except ImportError as exc:

@@ -37,6 +37,9 @@ def register(sub) -> None:
     p.add_argument("--episodes", type=int, default=24, help="training episodes per candidate")
     p.add_argument("--seed", type=int, default=20_000, help="seed of the episodes and of CMA-ES")
     p.add_argument("--preset", default="train", help="environment preset of the objective")
+    p.add_argument("--env-kwargs", nargs="+", default=None, metavar="KEY=VALUE",
+                   help="environment keywords of the objective, e.g. 'reward={residual: 6}' "
+                        "(the reward an agent was trained with)")
     p.add_argument("--out", default=None,
                    help="file or folder to write (default: baselines/<scene>.yaml here)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
@@ -55,13 +58,22 @@ def run(args) -> int:
             raise ValueError(f"--{name} must be >= 1 (got {getattr(args, name)})")
     if args.popsize is not None and args.popsize < 2:
         raise ValueError(f"--popsize must be >= 2 (got {args.popsize})")
+    from ..configuration import parse_assignments
     load_scene(args.scene)
-    load_preset(args.preset)
+    env_kwargs = parse_assignments(args.env_kwargs, "--env-kwargs")
+    load_preset(args.preset, **{k: v for k, v in env_kwargs.items()
+                                if k not in ("observe_balls", "record_history")})
     out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
     if out is not None and Path(out).exists() and not Path(out).is_dir() and not args.force:
         raise ValueError(f"{out!r} exists; pass --force to replace it")
+    if out is not None:
+        from .outputs import output_file
+        # the file tune() writes (a folder --out gets <scene>.yaml, as write_tuned names it)
+        target = (Path(out) if Path(out).suffix in (".yaml", ".yml")
+                  else Path(out) / f"{args.scene}.yaml")
+        output_file(target, "--out")
     result = tune(args.scene, tuple(args.family or FAMILIES), args.budget, args.episodes,
                   args.seed, args.preset, _executor(args), out=out, force=args.force,
-                  popsize=args.popsize, env_id=args.env)
+                  popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs)
     print(yaml.safe_dump(result, sort_keys=False))
     return 0

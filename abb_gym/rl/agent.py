@@ -8,15 +8,20 @@
       config.yml         the training config (zoo style, keyed by the env id) and, under
                          ``_run``, the env id, seed and the agent's policy-relevant
                          environment settings (``policy_env``)
+      agent.yml          the manifest: fingerprints of the files and what the normalisation
+                         was fitted on (env id, scene, observation layout)
 
-and returns a :class:`PPOPolicy`, which implements the evaluation ``Policy`` protocol of
+checks that the folder is complete and self-consistent (:mod:`abb_gym.rl.agent_files`: a
+missing, foreign or corrupt file is one :class:`~abb_gym.rl.agent_files.AgentError` naming
+it) and returns a :class:`PPOPolicy`, which implements the evaluation ``Policy`` protocol of
 :mod:`abb_gym.evaluation.registry` (``reset(env, mask)``, ``act(obs, info)``) on a native
 vector environment.  The VecNormalize statistics are frozen (``training=False,
 norm_reward=False``): evaluation never updates them.  Actions are the deterministic policy
 mean unless ``deterministic=False``.
 
 Environment checks (``reset``): the observation and action shapes must equal the agent's
-(``observe_balls`` in particular), and the policy-relevant preset fields
+(``observe_balls`` in particular), the observation layout the one recorded in ``agent.yml``,
+and the policy-relevant preset fields
 (:data:`abb_gym.rl.config.POLICY_FIELDS`) must match.  An agent trained with a control interval
 ``k`` times the environment's (``k`` an integer) holds each action for ``k`` steps (a zero-order
 hold, as the training environment did), deciding on the observation at the start of each
@@ -27,7 +32,6 @@ hold; a mismatch raises ``ValueError`` naming the field.  ``policy.env_kwargs`` 
 from __future__ import annotations
 
 import math
-import pickle
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +50,7 @@ def resolve_agent_path(path: str | Path) -> Path:
     """A run folder from a path (folder or its ``model.zip``) or an agent's name on the search
     path of :mod:`abb_gym.resources` (user folders first, then the shipped agents)."""
     from .. import resources
+    from .agent_files import AgentError
     p = Path(path)
     if p.is_file() and p.suffix == ".zip":
         p = p.parent
@@ -54,6 +59,9 @@ def resolve_agent_path(path: str | Path) -> Path:
         if found is not None:
             p = found
     if not (p / "model.zip").is_file():
+        if p.is_dir() and (p / "config.yml").exists():  # an agent folder with a bad model
+            what = "is a directory" if (p / "model.zip").is_dir() else "is missing"
+            raise AgentError(f"agent file {str(p / 'model.zip')!r} {what} (the PPO model)")
         raise ValueError(f"no PPO agent at {str(path)!r}: expected a folder with model.zip "
                          f"(a run folder) or an agent name, one of "
                          f"{resources.names('agents')}")
@@ -69,10 +77,13 @@ class PPOPolicy:
         ``policy_env``...), or {}.
     :param name: policy name in tables.
     :param deterministic: use the policy mean.
+    :param observation_names: the observation layout the agent was trained on (its
+        ``agent.yml``), checked against the environment's; None: not checked.
     """
 
     def __init__(self, model: Any, vecnormalize: Any = None, config: dict | None = None,
-                 name: str = "ppo", deterministic: bool = True):
+                 name: str = "ppo", deterministic: bool = True,
+                 observation_names: list[str] | None = None):
         self.model = model
         self.vecnormalize = vecnormalize
         if vecnormalize is not None:
@@ -81,23 +92,26 @@ class PPOPolicy:
         self.config = dict(config or {})
         self.name = name
         self.deterministic = bool(deterministic)
+        self.observation_names = (None if observation_names is None
+                                  else [str(n) for n in observation_names])
         self.env_id = self.config.get("env_id")
         self.policy_env: dict[str, Any] = dict(self.config.get("policy_env") or {})
         self.env_kwargs: dict[str, Any] = {}
         if self.policy_env.get("observe_balls"):
             self.env_kwargs["observe_balls"] = True
         self._repeat = 1
+        self._single = False
         self._count: np.ndarray | None = None
         self._last: np.ndarray | None = None
 
     # ------------------------------------------------------------------ checks
     def check_env(self, env: Any) -> int:
-        """Check that ``env`` (a vector environment) matches the agent; return the action
-        repeat (control-interval ratio).  Raises ``ValueError`` naming the mismatch."""
+        """Check that ``env`` (a vector or a single environment) matches the agent; return the
+        action repeat (control-interval ratio).  Raises ``ValueError`` naming the mismatch."""
         obs_shape = tuple(self.model.observation_space.shape)
         act_shape = tuple(self.model.action_space.shape)
-        env_obs = tuple(env.single_observation_space.shape)
-        env_act = tuple(env.single_action_space.shape)
+        env_obs = tuple(getattr(env, "single_observation_space", env.observation_space).shape)
+        env_act = tuple(getattr(env, "single_action_space", env.action_space).shape)
         want_balls = self.policy_env.get("observe_balls")
         if env_obs != obs_shape:
             hint = (f" (the agent was trained with observe_balls={want_balls})"
@@ -109,6 +123,15 @@ class PPOPolicy:
                              f"agent's {act_shape} (trained on {self.env_id})")
         native = getattr(env, "unwrapped", env)
         setup = getattr(native, "setup", None)
+        env_names = getattr(setup, "obs_names", None)
+        if self.observation_names is not None and env_names is not None:
+            diff = [k for k, (a, b) in enumerate(zip(env_names, self.observation_names))
+                    if a != b]
+            if diff:
+                k = diff[0]
+                raise ValueError(f"observation entry {k} of the environment is "
+                                 f"{env_names[k]!r}; the agent's normalisation was fitted on "
+                                 f"{self.observation_names[k]!r} there")
         if setup is None or not self.policy_env:
             return 1
         kind = self.policy_env.get("kind")
@@ -142,15 +165,21 @@ class PPOPolicy:
         return k
 
     # ------------------------------------------------------------------ Policy protocol
-    def reset(self, env: Any, mask: np.ndarray) -> None:
-        """Start the episodes of the sub-environments in ``mask`` (checks ``env`` first)."""
-        n = env.num_envs
-        if self._count is None or self._count.shape[0] != n:
+    def reset(self, env: Any, mask: np.ndarray | bool | None = None) -> None:
+        """Start the episodes of the sub-environments in ``mask`` (None: all; checks ``env``
+        first).  ``env`` may be a single environment (``gym.make``): :meth:`act` then takes
+        one observation and returns one action."""
+        single = not hasattr(env, "num_envs")  # gymnasium wrappers forward no attributes
+        n = 1 if single else int(env.num_envs)
+        if self._count is None or self._count.shape[0] != n or single != self._single:
             self._repeat = self.check_env(env)
+            self._single = single
             self._count = np.zeros(n, dtype=np.int64)
             self._last = np.zeros((n,) + tuple(self.model.action_space.shape),
                                   dtype=np.float32)
-        self._count[np.asarray(mask, bool)] = 0
+        if mask is None:
+            mask = np.ones(n, dtype=bool)
+        self._count[np.broadcast_to(np.asarray(mask, bool), (n,))] = 0
 
     def predict(self, obs: np.ndarray) -> np.ndarray:
         """Actions for raw observations (normalised with the frozen statistics)."""
@@ -161,8 +190,15 @@ class PPOPolicy:
         return np.clip(np.asarray(act, dtype=np.float32), -1.0, 1.0)
 
     def act(self, obs: np.ndarray, info: dict | None = None) -> np.ndarray:
+        """Actions for the observation batch (one action for one observation after
+        ``reset`` of a single environment)."""
         if self._count is None:
             raise RuntimeError("call reset(env, mask) before act()")
+        if self._single:
+            return self._act(np.asarray(obs)[None])[0]
+        return self._act(obs)
+
+    def _act(self, obs: np.ndarray) -> np.ndarray:
         if self._repeat == 1:
             return self.predict(obs)
         due = self._count % self._repeat == 0
@@ -170,16 +206,6 @@ class PPOPolicy:
             self._last[due] = self.predict(obs)[due]
         self._count += 1
         return self._last.copy()
-
-
-def _load_vecnormalize(path: Path):
-    if not path.exists():
-        return None
-    with open(path, "rb") as fh:
-        vn = pickle.load(fh)
-    vn.training = False
-    vn.norm_reward = False
-    return vn
 
 
 def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, *,
@@ -195,37 +221,29 @@ def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, 
     :param best: load ``best_model.zip`` / ``best_vecnormalize.pkl`` (best evaluation) instead
         of the final model.
     """
-    from stable_baselines3 import PPO
-
-    from ..configuration import read_yaml
-    from .networks import BoundedMlpPolicy
+    from .agent_files import check_folder, custom_objects_for, load_model, load_vecnormalize
 
     folder = resolve_agent_path(path)
-    cfg_path = folder / "config.yml"
-    data = read_yaml(cfg_path, "agent config") if cfg_path.exists() else {}
-    config = dict(data.get("_run") or {})
-    entry = data.get(config.get("env_id")) or {}
-    trained_id = config.get("env_id")
-    if env_id is not None and trained_id is not None and env_id != trained_id:
+    files = check_folder(folder, best=best)
+    config = files.run
+    trained_id = files.env_id
+    if env_id is not None and env_id != trained_id:
         raise ValueError(f"agent {str(folder)!r} was trained on {trained_id}, not {env_id}")
     scene_name = getattr(scene, "name", scene)
-    trained_scene = (config.get("policy_env") or {}).get("scene")
-    if scene_name is not None and trained_scene is not None and scene_name != trained_scene:
+    trained_scene = files.manifest["scene"]
+    if scene_name is not None and scene_name != trained_scene:
         import warnings
         warnings.warn(f"agent {folder.name!r} was trained on scene {trained_scene!r}; "
                       f"evaluating it on {scene_name!r}", stacklevel=2)
-    model_file = folder / ("best_model.zip" if best else "model.zip")
-    norm_file = folder / ("best_vecnormalize.pkl" if best else "vecnormalize.pkl")
-    if not model_file.exists():
-        raise ValueError(f"{str(model_file)!r} does not exist")
-    # the network class by its current name (agents of the first wave pickled an older
-    # module path for it)
-    custom = ({"policy_class": BoundedMlpPolicy}
-              if str(entry.get("policy", "")).endswith("BoundedMlpPolicy") else None)
-    model = PPO.load(model_file, device="cpu", custom_objects=custom)
-    vn = _load_vecnormalize(norm_file)
+    obs_size = files.manifest["observation"]["size"]
+    # the statistics first: reading them is cheap, the model costs a torch load
+    vn = (load_vecnormalize(files.norm_path, obs_size) if files.norm_path is not None
+          else None)
+    model = load_model(files.model_path, obs_size, files.manifest["action_size"],
+                       custom_objects_for(files.entry))
     return PPOPolicy(model, vn, config, name=name or f"ppo:{folder.name}",
-                     deterministic=deterministic)
+                     deterministic=deterministic,
+                     observation_names=files.observation_names)
 
 
 def load_ppo(arg: str, env_id: str | None = None, scene: Any = None, **_: Any) -> PPOPolicy:
