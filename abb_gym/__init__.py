@@ -1,12 +1,14 @@
 """abb-gym: Gymnasium environments and a simulator for automatic ball balancers."""
-import os
+from ._threads import quiet_openmp
 
-# numba's OpenMP threads otherwise spin after each parallel environment step and slow a torch
-# policy in the same process 5-20x (measured during PPO training); set before numba loads
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# idle OpenMP workers (numba's, torch's) otherwise spin after each parallel environment step
+# and slow PPO training 4-9x, whichever of torch and abb_gym is imported first (see
+# abb_gym._threads); before numba loads
+quiet_openmp()
 
-from ._jit_cache import flush_if_sources_changed  # noqa: E402
+from ._jit_cache import flush_if_sources_changed, install_locator  # noqa: E402
 
+install_locator()  # compiled kernels are cached in abb_gym/_kernels (shipped in the wheel)
 flush_if_sources_changed()  # before any compiled module loads a stale cache
 
 from .physics import (MotorDrive, Scene, SceneError, SimulationError, SpeedProfile, Trajectory,

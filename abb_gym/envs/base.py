@@ -104,9 +104,9 @@ COMMON_DOC = textwrap.dedent(r"""
       term is paid and ``info["failure"]`` says what happened; the observation is that of the
       last finite state.
     * truncated: ``episode_length`` has elapsed; the residual term is paid (see Rewards).
-      The environment truncates itself (episode
-      lengths depend on the scene); the ``max_episode_steps`` registered with gymnasium is a
-      backstop that never cuts an episode of a shipped preset.
+      The environment truncates itself (episode lengths depend on the scene); ``gym.make``
+      wraps the RunUp* environments in a ``TimeLimit`` of exactly this length
+      (``env.spec.max_episode_steps``; see :mod:`abb_gym.envs`).
 
     ## Info
 

@@ -9,9 +9,13 @@
 
 Both start the balls at 0/0 deg (Yoshida's Figs. 4.1/4.7 case) and run one ``simulate`` per
 point; the sweeps are small (tens of runs of a few ms) and show a progress bar.
+
+The ``plot_*`` functions write the chart and, next to it, its data as CSV (same name,
+``.csv``; :func:`write_csv`): one row per point, the units in the column names.
 """
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
@@ -85,7 +89,33 @@ def ball_position_study(scene_name: str = "yoshida_odd", masses=(0.5e-3, 1e-3, 1
     return _map(_position_task, todo, "ball position study", progress, executor)
 
 
+def write_csv(rows: list[dict], path) -> Path:
+    """Write ``rows`` (dicts with the same keys) as CSV to ``path``; NaN stays ``nan``, which
+    pandas and numpy read back as NaN.  Returns the path."""
+    if not rows:
+        raise ValueError("a study without rows has nothing to write")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
+def _save(fig, rows: list[dict], path) -> Path:
+    """Save the chart to ``path`` and its rows next to it (``.csv``); returns the chart."""
+    import matplotlib.pyplot as plt
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    write_csv(rows, path.with_suffix(".csv"))
+    return path
+
+
 def plot_settling_study(rows: list[dict], path) -> Path:
+    """Chart of :func:`settling_study` at ``path``, its data next to it (``.csv``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -99,14 +129,11 @@ def plot_settling_study(rows: list[dict], path) -> Path:
     ax.set_title("Settling period against dwell length (cf. Yoshida Fig. 4.23)")
     ax.grid(alpha=0.3)
     ax.legend()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, rows, path)
 
 
 def plot_ball_position_study(rows: list[dict], path) -> Path:
+    """Chart of :func:`ball_position_study` at ``path``, its data next to it (``.csv``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -130,8 +157,4 @@ def plot_ball_position_study(rows: list[dict], path) -> Path:
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("ball angle 2.5 s after the critical speed [deg]")
     np.atleast_1d(axes)[0].legend()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, rows, path)

@@ -21,13 +21,9 @@ of :mod:`abb_gym.resources`).
 """
 from __future__ import annotations
 
-import os
-
-# numba's OpenMP workers (the vector environment) and torch's share two cores; with OpenMP's
-# default busy-wait each parallel step leaves threads spinning that slow the next torch call
-# 5-20x.  Passive waiting costs the environment nothing measurable.  Effective only if set
-# before the OpenMP runtimes load (before torch is imported and the first parallel env step).
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# numba's and torch's OpenMP threads are kept from spinning against each other by
+# `import abb_gym` (abb_gym._threads), which runs before this module, whichever of torch and
+# abb_gym the user imported first
 
 try:
     import stable_baselines3  # noqa: F401

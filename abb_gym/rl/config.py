@@ -29,14 +29,15 @@ The keys, declared once on :class:`TrainConfig`:
 
 {table}
 
-Any other key under the id must be a PPO keyword argument.  The ``_abb_gym`` keys are also
-accepted under the id (files of the first wave).  ``policy_kwargs`` and ``normalize`` may be
-mappings or the zoo's Python strings, which are read without evaluating code
-(:func:`abb_gym.configuration.parse_python_literal`: literals, ``dict(...)`` and ``nn.X``);
-``activation_fn`` may name a ``torch.nn`` activation (``Tanh``).  A file may hold several ids;
-``load_config(path, env_id)`` picks one.  Top-level keys starting with ``_`` other than
-``_abb_gym`` are ignored (a run's ``config.yml`` keeps its metadata under ``_run``, so it can
-be trained again as it is).
+Any other key under the id must be a PPO keyword argument (``tensorboard_log: DIR``
+included: TensorBoard event files, as ``abb-gym train --tensorboard-log DIR``).  The
+``_abb_gym`` keys are also accepted under the id (files of the first wave).
+``policy_kwargs`` and ``normalize`` may be mappings or the zoo's Python strings, which are
+read without evaluating code (:func:`abb_gym.configuration.parse_python_literal`: literals,
+``dict(...)`` and ``nn.X``); ``activation_fn`` may name a ``torch.nn`` activation (``Tanh``).
+A file may hold several ids; ``load_config(path, env_id)`` picks one.  Top-level keys
+starting with ``_`` other than ``_abb_gym`` are ignored (a run's ``config.yml`` keeps its
+metadata under ``_run``, so it can be trained again as it is).
 
 The evaluation environment is ``{scene, preset: "test"}`` plus the *policy-relevant* fields of
 ``env_kwargs`` (:data:`POLICY_FIELDS`: what changes the observation or the meaning of an
@@ -242,6 +243,11 @@ class TrainConfig:
             values[key] = v
         if "policy" in values:
             values["policy"] = POLICY_NAMES[values["policy"]]
+        tb = raw.get("tensorboard_log")
+        if tb is not None and (not isinstance(tb, str) or not tb):
+            # SB3 would only fail when training starts, after the environments are built
+            raise TrainConfigError(f"{where}: field 'tensorboard_log' must be a folder path "
+                                   f"or null (got {tb!r})")
         for key in ("learning_rate", "clip_range"):
             if key in raw:
                 _schedule(key, raw[key])

@@ -29,8 +29,16 @@ file                       content
 ``evaluations.npz``        SB3 ``EvalCallback`` layout: timesteps, results (episode returns),
                            ep_lengths
 ``evaluation.json``        final test-set evaluation of the final model (summary + episodes)
+``agent.yml``              manifest: fingerprints of the models and statistics, and the env
+                           id, scene and observation layout the statistics were fitted on
+                           (:mod:`abb_gym.rl.agent_files`; checked when the agent is loaded)
 ``checkpoints/``           ``ppo_<steps>_steps.zip`` and ``ppo_vecnormalize_<steps>_steps.pkl``
 =========================  ==================================================================
+
+With ``tensorboard_log`` (:func:`train`'s argument or the config's PPO keyword), SB3 also
+writes TensorBoard event files there, one run ``<config>_s<seed>_<n>`` per training: the
+``train/`` losses, the ``rollout/`` episode returns and lengths, and the ``eval/`` test-set
+means of every evaluation (``tensorboard --logdir DIR``).
 
 The evaluation is a fixed seeded test set (``eval_seed``, ``eval_episodes``) on the ``test``
 preset (see :mod:`abb_gym.rl.rollout` for the metrics).  Wall time and env-steps/s are printed
@@ -59,7 +67,7 @@ from ..evaluation.evaluate import summarise
 from .rollout import KEY_METRICS, brief, run_episodes
 
 __all__ = ["train", "RunResult", "FrozenNormalizer", "TestSetEvalCallback", "train_trial",
-           "seeded_trial", "default_run_dir"]
+           "seeded_trial", "default_run_dir", "check_tensorboard_log", "tensorboard_run_name"]
 
 
 
@@ -251,9 +259,35 @@ def write_config(run_dir: Path, cfg: TrainConfig, meta: dict[str, Any]) -> None:
     (run_dir / "config.yml").write_text(yaml.safe_dump(data, sort_keys=False))
 
 
+def check_tensorboard_log(value: Any) -> Path | None:
+    """The TensorBoard folder ``value`` (None: none) as a path; ``ValueError`` if it is not a
+    path or names a file, ``ImportError`` naming the package if TensorBoard is missing (both
+    before any training starts)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (str, os.PathLike)) or not str(value):
+        raise ValueError(f"tensorboard_log must be a folder path (got {value!r})")
+    path = Path(value)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"tensorboard_log {str(path)!r} is a file, not a folder")
+    try:
+        from torch.utils.tensorboard import SummaryWriter  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(f"tensorboard_log needs the tensorboard package: pip install "
+                          f"tensorboard (part of abb-gym[train]) ({exc})") from exc
+    return path
+
+
+def tensorboard_run_name(cfg: TrainConfig, seed: int) -> str:
+    """TensorBoard run name of a training run, ``<config>_s<seed>`` (SB3 appends ``_<n>``)."""
+    stem = Path(cfg.source).stem if cfg.source else cfg.env_id.split("/")[-1]
+    return f"{stem}_s{int(seed)}"
+
+
 def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None = None,
           progress: bool = True, verbose: int = 0, torch_threads: int | None = 1,
-          final_eval: bool = True) -> RunResult:
+          final_eval: bool = True,
+          tensorboard_log: str | os.PathLike | None = None) -> RunResult:
     """Train PPO as ``cfg`` says and write the run folder (see the module docstring).
 
     :param seed: seed of everything random in training (>= 0).
@@ -262,6 +296,10 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     :param torch_threads: ``torch.set_num_threads`` (1 is fastest for these small networks on
         a busy 2-core machine); None leaves torch's default.
     :param final_eval: evaluate the final model on the test set (``evaluation.json``).
+    :param tensorboard_log: folder of TensorBoard event files (SB3's ``tensorboard_log``,
+        overrides the config's): the training curves, the ``rollout/`` episode statistics and
+        the ``eval/`` test-set means, in ``<folder>/<config>_s<seed>_<n>``; needs the
+        ``tensorboard`` package (training extra).  None: the config's, else no TensorBoard.
     """
     import torch
     from stable_baselines3 import PPO
@@ -271,6 +309,12 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0 (got {seed!r})")
+    ppo_kw = cfg.ppo_kwargs()
+    if tensorboard_log is not None:
+        ppo_kw["tensorboard_log"] = tensorboard_log
+    tb_dir = check_tensorboard_log(ppo_kw.get("tensorboard_log"))
+    if tb_dir is not None:
+        ppo_kw["tensorboard_log"] = str(tb_dir)
     if torch_threads is not None:
         torch.set_num_threads(int(torch_threads))
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg, seed)
@@ -280,7 +324,6 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     venv = make_sb3_env(cfg.env_id, cfg.n_envs, cfg.env_kwargs,
                         bootstrap_truncated=cfg.bootstrap_truncated)
     env = VecMonitor(venv)
-    ppo_kw = cfg.ppo_kwargs()
     if cfg.normalize is not None:
         norm_kw = dict(cfg.normalize)
         norm_kw.setdefault("gamma", ppo_kw.get("gamma", 0.99))
@@ -291,6 +334,8 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         "policy_env": policy_env_fields(venv.unwrapped), "eval_env_kwargs": eval_kwargs,
         "command": " ".join(sys.argv), "versions": _versions(),
     }
+    if tb_dir is not None:
+        meta["tensorboard_log"] = _repo_relative(str(tb_dir))
     write_config(run_dir, cfg, meta)
 
     from .networks import POLICIES
@@ -305,7 +350,8 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
                                             str(run_dir / "checkpoints"), name_prefix="ppo",
                                             save_vecnormalize=cfg.normalize is not None))
     t0 = time.perf_counter()
-    model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=progress)
+    model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=progress,
+                tb_log_name=tensorboard_run_name(cfg, seed))
     wall = time.perf_counter() - t0
     steps = int(model.num_timesteps)
     model.save(run_dir / "model.zip")
@@ -325,6 +371,9 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
             indent=1))
         meta["final_evaluation"] = brief(evaluation)
     write_config(run_dir, cfg, meta)
+    # last, over the files as they now are: the manifest fingerprints them
+    from .agent_files import write_manifest  # here: keeps `python -m` of that module clean
+    write_manifest(run_dir, observation_names=venv.unwrapped.setup.obs_names)
     env.close()
     return RunResult(run_dir, wall, steps, steps / wall, evaluation)
 
@@ -334,7 +383,8 @@ def train_trial(config: dict) -> dict:
     """Trainable for :func:`abb_gym.execution.tune.run_trials` (one seed of a config)."""
     cfg = TrainConfig.from_mapping(config["env_id"], config["hyperparams"],
                                    config.get("source", ""), config.get("settings"))
-    res = train(cfg, seed=int(config["seed"]), run_dir=config["run_dir"], progress=False)
+    res = train(cfg, seed=int(config["seed"]), run_dir=config["run_dir"], progress=False,
+                tensorboard_log=config.get("tensorboard_log"))
     out = dict(brief(res.evaluation)) if res.evaluation else {}
     out.update({"wall_time_s": res.wall_time_s, "env_steps_per_s": res.env_steps_per_s,
                 "run_dir": str(res.run_dir)})

@@ -1,0 +1,85 @@
+"""Keep numba's and torch's OpenMP threads from spinning against each other.
+
+The vector environments run one compiled parallel call per step (numba); a torch policy in
+the same process runs its own OpenMP threads.  GNU OpenMP reads ``OMP_WAIT_POLICY`` once, when
+its library loads; without it an idle worker busy-waits about 300 000 iterations after every
+parallel region, and on a small machine those spinning workers slow the next environment step
+or the next torch call: SB3 PPO ``learn(2048)`` with 8 sub-environments took 66 s instead of
+8 s on a 2-core machine.
+
+:func:`quiet_openmp` runs on ``import abb_gym`` (before numba loads):
+
+* ``OMP_WAIT_POLICY`` unset: it is set to ``PASSIVE``; every OpenMP runtime loaded from now
+  on (numba's, torch's) sleeps when idle.  Costs the environments nothing measurable.
+* an OpenMP runtime was loaded before that (typically ``import torch`` before ``import
+  abb_gym``; rl_zoo3 always does so), it already busy-waits and cannot be changed.  Then
+
+  - numba's threading layer becomes ``workqueue`` (numba's own pool, which sleeps when idle):
+    numba's OpenMP layer binds to the runtime torch loaded globally (``LD_DEBUG=bindings``
+    shows ``GOMP_parallel`` resolved in ``torch/lib/libgomp.so.1``), spinning included;
+  - torch's intra-op threads become 1 (``torch.set_num_threads(1)``): its OpenMP workers then
+    never run, so never spin.  These policies are small MLPs, for which one thread is as fast
+    (``abb_gym.rl.train`` uses one thread in any case).
+
+  Measured on 2 cores, ``RunUpSpeed-v0`` x 8: SB3 PPO ``learn(2048)`` (default settings)
+  took 66 s torch first without this, 8 s with it, 8-9 s abb_gym first; the project's
+  :func:`abb_gym.rl.train` (16 384 steps, already one torch thread) 28 s torch first with
+  numba's OpenMP layer, 3.8 s with ``workqueue``, 3.8 s abb_gym first.  Either change alone
+  is not enough: 65 s with ``workqueue`` only, 22 s with one torch thread only.
+
+Nothing is changed when ``OMP_WAIT_POLICY`` was set before (``ACTIVE`` is a choice), and numba's
+layer is not chosen when ``NUMBA_THREADING_LAYER`` is set or a parallel function already ran.
+After the adjustment ``torch.set_num_threads(n)`` still works; it brings the spinning back.
+The ``workqueue`` layer must not run parallel functions from several Python threads at once
+(numba aborts the process); set ``OMP_WAIT_POLICY=PASSIVE`` before importing torch to keep
+numba's OpenMP layer instead.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import sys
+
+__all__ = ["quiet_openmp", "ADJUSTED"]
+
+#: what :func:`quiet_openmp` changed in this process (empty: nothing; for diagnostics, tests)
+ADJUSTED: dict[str, object] = {}
+
+# GNU (libgomp), Intel (libiomp5) and LLVM (libomp) OpenMP runtimes, versioned copies included
+_OPENMP_LIBRARY = re.compile(r"/lib(?:gomp|iomp5|omp)[-.\w]*\.so")
+
+
+def openmp_loaded() -> bool:
+    """True if an OpenMP runtime is mapped into this process (Linux ``/proc/self/maps``;
+    elsewhere: whether torch, which brings its own, is imported)."""
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            return _OPENMP_LIBRARY.search(fh.read()) is not None
+    except OSError:
+        return "torch" in sys.modules
+
+
+def quiet_openmp() -> dict[str, object]:
+    """Apply the rules of the module docstring once; returns :data:`ADJUSTED`."""
+    if "OMP_WAIT_POLICY" in os.environ:
+        return ADJUSTED  # the user's choice, or already done by an earlier call
+    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    ADJUSTED["OMP_WAIT_POLICY"] = "PASSIVE"
+    if not openmp_loaded():
+        return ADJUSTED
+    # imported by name: a numba import statement here would put this module (which compiles
+    # nothing) into the kernel-cache fingerprint of abb_gym._jit_cache
+    config = importlib.import_module("numba.core.config")
+    parallel = sys.modules.get("numba.np.ufunc.parallel")
+    launched = parallel is not None and getattr(parallel, "_is_initialized", False)
+    if "NUMBA_THREADING_LAYER" not in os.environ and not launched:
+        # numba keeps values set on its config module unless a NUMBA_* variable changes later
+        config.THREADING_LAYER = "workqueue"
+        ADJUSTED["numba_threading_layer"] = "workqueue"
+    torch = sys.modules.get("torch")
+    if torch is not None and hasattr(torch, "set_num_threads"):
+        ADJUSTED["torch_threads_before"] = torch.get_num_threads()
+        torch.set_num_threads(1)
+        ADJUSTED["torch_threads"] = 1
+    return ADJUSTED
