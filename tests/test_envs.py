@@ -165,10 +165,10 @@ def test_success_pays_residual_and_settles():
     assert obs[0] == pytest.approx(1.0)
 
 
-def _hold_speed_fraction(fraction: float, seed: int):
+def _hold_speed_fraction(fraction: float, seed: int, **kwargs):
     """RunUpSpeed driven to ``fraction`` x w_op (ramp at the largest acceleration, then hold),
     on the same machine; returns (return, terminated, last info)."""
-    env = make()
+    env = make(**kwargs)
     env.reset(seed=seed)
     setup = env.unwrapped.setup
     target = fraction * setup.operating_speed
@@ -192,6 +192,19 @@ def test_parking_below_the_operating_speed_never_scores_better(seed):
     assert te_full and info_full["settled"]
     assert not te_parked and not info_parked["settled"] and not info_parked["at_speed"]
     assert parked < full
+
+
+def test_entering_the_band_just_before_the_limit_never_scores_better():
+    """A run-up cut by the episode limit halfway through its settling window failed: it pays
+    the residual at its bound, not over the moment it spent in the band (the tuner found
+    candidates that scored better than every finished run-up that way)."""
+    full, te_full, info_full = _hold_speed_fraction(1.0, 0)
+    assert te_full and info_full["settled"]
+    settle = make().unwrapped.setup.config.settle_time
+    limit = info_full["run_up_time"] + 0.5 * settle
+    cut, te_cut, info_cut = _hold_speed_fraction(1.0, 0, episode_length=limit)
+    assert not te_cut and info_cut["at_speed"] and not info_cut["settled"]
+    assert cut < full
 
 
 def test_truncation_at_episode_length():

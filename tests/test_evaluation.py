@@ -130,11 +130,19 @@ def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
         assert key in data["policies"][0]["summary"] and key in data["policies"][0]["episodes"][0]
 
 
-def test_a_failure_is_never_counted_as_a_success(tmp_path):
+def test_a_failure_is_never_counted_as_a_success(tmp_path, monkeypatch):
     """The first wave's speed_reduction never finished an episode yet sat on the Pareto
     front: a run-up that never completes has at_speed False, its run-up time is the episode
-    limit, no residual, and it stays off the front."""
+    limit, no residual, and it stays off the front.  (Here a speed_reduction whose plateau
+    outlasts the episode, from a user configuration folder.)"""
+    from abb_gym import resources
+    (tmp_path / "cfg" / "baselines").mkdir(parents=True)
+    (tmp_path / "cfg" / "baselines" / "yoshida_odd.yaml").write_text(
+        "scene: yoshida_odd\nfamilies:\n  speed_reduction:\n    params:\n"
+        "      plateau_time: 100.0\n")
+    monkeypatch.setenv(resources.ENV_VAR, str(tmp_path / "cfg"))
     res = evaluate(SPEED, "yoshida_odd", "baseline:speed_reduction", episodes=3, seed=0)
+    assert "(tuned)" in res.policy
     setup_length = gym.make(SPEED).unwrapped.setup.episode_length
     ok = evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=3, seed=0)
     for e in res.episodes:
@@ -201,3 +209,18 @@ def test_evaluate_cli(tmp_path, capsys):
     assert main(["evaluate", "--policy", "baseline:magic", "--episodes", "2",
                  "--out", str(tmp_path)]) == 2
     assert main(["evaluate", "--policy", "nonsense", "--out", str(tmp_path)]) == 2
+
+
+def test_tuner_survives_a_flat_objective(monkeypatch):
+    """Every candidate scoring the same (a family that never reaches speed on a scene) ends
+    the search instead of failing inside CMA-ES."""
+    def flat(scene_name, family, candidates, *args, **kwargs):
+        return [{"family": family, "params": c, "return": -5.0, "run_up_time": 1.0,
+                 "residual_vibration": 1.0, "peak_whirl": 1.0, "at_speed": 0.0,
+                 "balanced": 0.0} for c in candidates]
+    monkeypatch.setattr(tuner, "evaluate_candidates", flat)
+    # seed 0 and budget 20: the CMA-ES run (cma seed 1) that failed on spannan_cfrp's ramp
+    result = tuner.tune("yoshida_odd", families=("ramp", "knots"), budget=20, episodes=1,
+                        seed=0, progress=False)
+    assert set(result["families"]) == {"ramp", "knots"}
+    assert all(1 <= f["candidates"] <= 21 for f in result["families"].values())
