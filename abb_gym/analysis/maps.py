@@ -38,7 +38,7 @@ import numpy as np
 from ..execution import Executor
 from ..physics.scene import Scene
 from .groups import GROUP_FIELDS, Groups
-from .rotating_frame import DEFAULT_TOL, family_stability
+from .rotating_frame import DEFAULT_TOL, _check_omega, family_stability
 
 __all__ = ["StabilityMap", "stability_map", "resolve_groups", "onset_speed", "MAP_FIELDS"]
 
@@ -160,9 +160,14 @@ class StabilityMap:
 
 
 def _values(name: str, values: Sequence[float]) -> np.ndarray:
-    arr = np.asarray(values, float).ravel()
+    try:
+        arr = np.asarray(values, float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"axis {name!r} needs numbers (got {values!r})") from None
     if arr.size == 0 or not np.all(np.isfinite(arr)):
-        raise ValueError(f"axis {name!r} needs at least one finite value (got {values!r})")
+        bad = "no values" if arr.size == 0 else f"{int(np.sum(~np.isfinite(arr)))} of " \
+            f"{arr.size} values not finite"
+        raise ValueError(f"axis {name!r} needs finite values (got {bad})")
     return arr
 
 
@@ -180,8 +185,8 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     x, y : (axis name, values) - names as in the module docstring
     n_balls : ball counts to evaluate at the same eta_total (default: the base's count and,
         for overlays, 2 and 3); the first one is the shaded one in :meth:`StabilityMap.plot`
-    omega : speed ratio used when neither axis is ``Omega``
-    n_members : family members per point (Lu & Hung discretisation, see
+    omega : speed ratio used when neither axis is ``Omega`` (always checked: > 0)
+    n_members : family members per point (an integer >= 1) (Lu & Hung discretisation, see
         :func:`~abb_gym.analysis.rotating_frame.balanced_family`)
     workers : local processes (default: all cores; 1 runs in this process); shorthand for
         ``executor=Executor(workers=workers)``
@@ -194,6 +199,19 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     yname, yv = y[0], _values(y[0], y[1])
     if xname == yname:
         raise ValueError(f"x and y must be different parameters (both {xname!r})")
+    # every input is checked here, before any task is dispatched: a bad one is one ValueError,
+    # not the same error from every task (and no worker starts for nothing)
+    if isinstance(n_members, bool) or not isinstance(n_members, (int, np.integer)) \
+            or n_members < 1:
+        raise ValueError(f"n_members must be an integer >= 1 (got {n_members!r})")
+    n_members = int(n_members)
+    _check_omega(omega)  # even when an axis is Omega: a nan here is a mistake
+    try:
+        tol = float(tol)
+    except (TypeError, ValueError):
+        tol = math.nan
+    if not (math.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a finite number > 0 (got {tol!r})")
     g0, _ = resolve_groups(base, {}, length_scale)
     if n_balls is None:
         n_balls = tuple(dict.fromkeys([g0.n_balls, 3, 2]))
@@ -204,7 +222,7 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     for yval in yv:
         for xval in xv:
             g, om = resolve_groups(base, {xname: xval, yname: yval}, length_scale)
-            om = omega if om is None else om
+            om = omega if om is None else _check_omega(om)
             for n in n_balls:
                 gn = g if n == g.n_balls else g.with_ball_count(n)
                 tasks.append((gn, float(om), n_members, tol))

@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from ..evaluation.evaluate import Chunk, run_chunk
+from ..evaluation.evaluate import Chunk, check_inputs, run_chunk
 from ..physics import rotor
 from . import profiles
 from .baseline_policy import BaselinePolicy, ClosedLoopPolicy
@@ -50,6 +50,13 @@ def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
     out["settle"] = setup.config.settle_time
     out["aop"] = a_op / setup.vibration_scale
     return out
+
+
+def _check_counts(**counts: Any) -> None:
+    """Raise ValueError naming the first count that is not an integer >= 1."""
+    for name, v in counts.items():
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be an integer >= 1 (got {v!r})")
 
 
 def params_from_unit(family: str, x: np.ndarray, scales: dict[str, float]) -> dict[str, Any]:
@@ -117,6 +124,8 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
     episodes that settled; ``at_speed`` is the share that did)."""
     from ..physics.scene import load_scene
     load_scene(scene_name)  # validate early, with the scene's own error message
+    _check_counts(episodes=episodes)
+    check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     for c in candidates:
         build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // episodes)
@@ -156,8 +165,11 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
     best = default
     evaluations = 1
     if space:
+        # maxstd: a step beyond half the unit box means nothing, and without a cap cma 4.x
+        # fails on a flat objective ("not yet initialized (dimension needed)"), as when no
+        # candidate of a family ever reaches the operating speed
         opts = {"bounds": [0.0, 1.0], "seed": seed % (2 ** 31 - 1) + 1, "verbose": -9,
-                "maxfevals": max(budget - 1, 1)}
+                "maxfevals": max(budget - 1, 1), "maxstd": 0.5}
         if popsize:
             opts["popsize"] = popsize
         es = cma.CMAEvolutionStrategy(np.full(len(space), 0.5), 0.3, opts)
@@ -189,8 +201,13 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
     families = tuple(families)
     for fam in families:
         family_class(fam)
-    if budget < 1 or episodes < 1:
-        raise ValueError(f"budget and episodes must be >= 1 (got {budget}, {episodes})")
+    _check_counts(budget=budget, episodes=episodes)
+    if popsize is not None and (isinstance(popsize, bool) or not isinstance(
+            popsize, (int, np.integer)) or popsize < 2):
+        # CMA-ES ranks at least two candidates per generation
+        raise ValueError(f"popsize must be an integer >= 2 (got {popsize!r})")
+    # before any candidate runs: every input a task will use (a bad one is one error)
+    check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     scales = search_scales(scene_name, env_id, preset)
     result: dict[str, Any] = {
         "scene": scene_name, "env": env_id, "preset": preset,
@@ -250,6 +267,11 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
           ) -> list[dict]:
     """Each family over its box (a Latin hypercube of ``n`` points) on the test preset: rows
     with the mean settled run-up time and residual."""
+    families = tuple(families)
+    for fam in families:
+        family_class(fam)
+    _check_counts(n=n, episodes=episodes)
+    check_inputs(env_id, scene_name, preset, seed)
     scales = search_scales(scene_name, env_id, preset)
     rng = np.random.default_rng(seed + 7)
     rows = []

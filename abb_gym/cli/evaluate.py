@@ -47,25 +47,19 @@ def _executor(args):
     return executor_from_args(args) if chosen else None  # default: this process, both cores
 
 
-def check_agents(specs: list[str], env_id: str, scene: str) -> None:
-    """Load every ``ppo:`` agent (also inside ``replay:``) once here, so that a bad agent
-    folder is one line before any episode runs, whichever executor runs the episodes."""
-    from ..evaluation.registry import resolve
-    for spec in specs:
-        inner = spec
-        while inner.startswith("replay:"):
-            inner = inner[len("replay:"):]
-        if inner.startswith("ppo:"):
-            resolve(inner, env_id, scene)
-
-
 def run(args) -> int:
-    from ..evaluation.evaluate import evaluate
+    from ..evaluation.evaluate import check_inputs, evaluate
     from ..evaluation.report import summary_table, write_report
     from .outputs import output_folder
-    if args.episodes < 1:
-        raise ValueError(f"--episodes must be >= 1 (got {args.episodes})")
-    check_agents(args.policy, args.env, args.scene)
+    # every input before any folder or task: one line, exit 2
+    for label, n, least in (("--episodes", args.episodes, 1), ("--sweep", args.sweep, 0),
+                            ("--sweep-episodes", args.sweep_episodes, 1)):
+        if n < least:
+            raise ValueError(f"{label} must be >= {least} (got {n})")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0 (got {args.seed})")
+    for spec in args.policy:  # a bad agent folder is one line before any episode
+        check_inputs(args.env, args.scene, args.preset, args.seed, spec)
     output_folder(args.out, "--out")
     ex = _executor(args)
     results = [evaluate(args.env, args.scene, spec, args.episodes, args.seed, args.preset,

@@ -60,9 +60,25 @@ def run(args: argparse.Namespace) -> int:
     from ..physics.scene import load_scene
     from .outputs import output_file
 
-    for label, n in (("--nx", args.nx), ("--ny", args.ny)):
+    # every input before any worker starts or any task is dispatched (stability_map checks
+    # the grid again): a bad one is one line, exit 2, never a task that fails and is retried
+    for label, n in (("--nx", args.nx), ("--ny", args.ny), ("--members", args.members)):
         if n < 1:
             raise ValueError(f"{label} must be >= 1 (got {n})")
+    for label, values in (("--x-range", args.x_range), ("--y-range", args.y_range),
+                          ("--omega", [args.omega])):
+        if not all(np.isfinite(values)):
+            raise ValueError(f"{label} must be finite (got {' '.join(map(str, values))})")
+    if not args.omega > 0:
+        raise ValueError(f"--omega must be > 0 (got {args.omega})")
+    if args.balls is not None and any(n < 1 for n in args.balls):
+        raise ValueError(f"--balls must be ball counts >= 1 (got {args.balls})")
+    if args.length_scale is not None and not (np.isfinite(args.length_scale)
+                                              and args.length_scale > 0):
+        raise ValueError(f"--length-scale must be a finite length > 0 [m] "
+                         f"(got {args.length_scale})")
+    if args.x == args.y:
+        raise ValueError(f"--x and --y must be different parameters (both {args.x!r})")
     executor = executor_from_args(args, progress=not args.no_progress)
     from ..configuration import parse_assignments
     settings = parse_assignments(args.set, "--set")
@@ -86,6 +102,11 @@ def run(args: argparse.Namespace) -> int:
         if "n_balls" in settings:
             settings["n_balls"] = int(settings["n_balls"])
         base = Groups().replace(**settings) if settings else Groups()
+    # the axis names and the grid's corners, as stability_map resolves every point
+    from ..analysis.maps import resolve_groups
+    for xv in args.x_range:
+        for yv in args.y_range:
+            resolve_groups(base, {args.x: xv, args.y: yv}, args.length_scale)
     # after the inputs (no folders for a rejected command), before any point is computed
     for suffix in (".csv", ".png"):
         output_file(f"{args.out}{suffix}", "--out")

@@ -14,15 +14,19 @@ def register(sub) -> None:
     p = sub.add_parser("study", help="Yoshida-style parameter studies (charts + tables)",
                        description=__doc__)
     p.add_argument("which", choices=["settling", "ball-position"])
-    p.add_argument("--scene", default="yoshida_odd")
-    p.add_argument("--out", default="out/study")
+    p.add_argument("--scene", default="yoshida_odd", help="scene name or YAML path")
+    p.add_argument("--out", default="out/study", help="output folder (created)")
     add_executor_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..evaluation import studies
+    from ..physics.scene import load_scene
     from .outputs import output_folder
+    # the inputs first: a bad scene is one line before any folder or task exists (the study
+    # functions check their points again before they dispatch)
+    load_scene(args.scene)
     out = output_folder(args.out, "--out")
     ex = _executor(args)
     if args.which == "settling":

@@ -58,11 +58,16 @@ def run(args) -> int:
             raise ValueError(f"--{name} must be >= 1 (got {getattr(args, name)})")
     if args.popsize is not None and args.popsize < 2:
         raise ValueError(f"--popsize must be >= 2 (got {args.popsize})")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0 (got {args.seed})")
     from ..configuration import parse_assignments
+    from ..evaluation.evaluate import check_inputs
     load_scene(args.scene)
     env_kwargs = parse_assignments(args.env_kwargs, "--env-kwargs")
     load_preset(args.preset, **{k: v for k, v in env_kwargs.items()
                                 if k not in ("observe_balls", "record_history")})
+    # the environment every task makes, once here (keywords, stiffness of the preset)
+    check_inputs(args.env, args.scene, args.preset, args.seed, **env_kwargs)
     out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
     if out is not None and Path(out).exists() and not Path(out).is_dir() and not args.force:
         raise ValueError(f"{out!r} exists; pass --force to replace it")

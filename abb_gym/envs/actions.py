@@ -66,17 +66,20 @@ def write_interval_row(kind, d, a, t0, th, w, dt, operating_speed, max_accelerat
 
 # --------------------------------------------------------------------------- Python side
 def as_action_array(action: Any, shape: tuple[int, ...], what: str = "action") -> np.ndarray:
-    """``action`` as a float64 array of exactly ``shape``; anything else (another shape, a
-    scalar for a vector, booleans, text) raises ValueError naming the expected shape."""
+    """``action`` as a float64 array of exactly ``shape`` (no reshaping, no broadcasting: a
+    transposed batch would scramble the actions); anything else (another shape, a scalar for
+    a vector, booleans, text, objects) raises a one-line ValueError naming the expected and
+    the given shape or dtype."""
     try:
         a = np.asarray(action)
     except (TypeError, ValueError):
         a = None
     if a is None or a.dtype.kind not in "fiu" or a.shape != shape:
-        got = "an unreadable value" if a is None else (
-            f"dtype {a.dtype}" if a.dtype.kind not in "fiu" else f"shape {a.shape}")
+        got = ("an unreadable value" if a is None else
+               f"dtype {a.dtype} of shape {a.shape}" if a.dtype.kind not in "fiu"
+               else f"shape {a.shape}")
         raise ValueError(f"{what} must be an array of numbers of shape {shape} in [-1, 1] "
-                         f"(got {got}: {action!r})")
+                         f"(got {got}, {type(action).__name__})")
     return a.astype(np.float64, copy=False)
 
 

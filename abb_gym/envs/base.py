@@ -14,14 +14,16 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import logger
+from gymnasium.utils import seeding
 
 from .actions import as_action_array
 from .info import check_info_level, step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
+from . import episodes
 from .episodes import Episode, EpisodeTable
-from .setup import Buffers, EnvSetup, SetupAccess
+from .setup import Buffers, EnvSetup, SetupAccess, check_seed, draw_safely
 
 COMMON_DOC = textwrap.dedent(r"""
     ## Observation Space
@@ -67,7 +69,12 @@ COMMON_DOC = textwrap.dedent(r"""
       scene's support, this episode's imbalance U; :func:`abb_gym.physics.rotor.
       reference_amplitudes`): the steady Jeffcott amplitude ``U w^2 / sqrt((k - M w^2)^2 +
       (c w)^2)`` (larger of the two axes), at its peak over [0, w_op] and at w_op.  A residual
-      ratio of 1 is no better than without a balancer.
+      ratio of 1 is no better than without a balancer.  U is floored at a tenth of the
+      balancing capacity, ``U = max(U0, 0.1 sum m_i R)`` (:func:`abb_gym.physics.rotor.
+      imbalance_scale`): below it the balls' own imbalance, not U0, sets the vibration, and
+      dividing by U0 would make the return scale as 1/U0 (infinite at a subnormal U0).  The
+      reward is continuous and finite down to U0 = 0; every shipped preset draws U0 above
+      the floor.
     * The operating band, the settling window and the residual are those of
       :mod:`abb_gym.physics.runup`: "in the band" means ``|w - w_op| <= at_speed_tolerance *
       w_op`` (0.2 %, a drive's speed loop); the run-up completes after an unbroken stay of
@@ -159,7 +166,19 @@ COMMON_DOC = textwrap.dedent(r"""
 
     Actions outside [-1, 1] are clipped with a warning the first time.  Non-finite actions
     (NaN, inf) are rejected with a ``ValueError`` and the state is left unchanged.  An action
-    of the wrong shape raises ``ValueError``.
+    must have exactly the action space's shape (no reshaping: a scalar, ``(1, 1, 1)`` or text
+    raises ``ValueError`` naming the expected and the given shape).
+
+    ``reset`` checks everything (seed: None or an int >= 0; every option) before it changes
+    anything: a rejected reset raises ``ValueError`` naming the field and leaves the
+    environment, its random generator included, as it was.  Angles (``imbalance_phase``,
+    ``ball_angles``) are reduced to [-pi, pi]: ``1e16`` gives the machine of
+    ``math.remainder(1e16, 2 pi)``.  Under RK4, an episode whose ball drag or rolling
+    resistance would force a step more than 100 x shorter than its rotation needs
+    (``ball_drag_scale=1e6``: millions of steps per control interval) is refused with a
+    ``ValueError`` that says what to use (``integrator="etdrk4"`` or smaller scales); a
+    preset whose ``randomize`` ranges allow such episodes is refused when the environment is
+    made (:mod:`abb_gym.envs.episodes`).
 """)
 __doc__ += COMMON_DOC
 
@@ -259,8 +278,18 @@ class BalancerEnv(SetupAccess, gym.Env):
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        self.setup.reset_rows(self._bufs, self._table, [0], [self.np_random], [options])
+        # everything is checked and computed before any state changes: a rejected reset
+        # (bad seed, bad option, too stiff an episode) leaves the environment as it was
+        seed = check_seed(seed)
+        if seed is not None:
+            rng, seed_value = seeding.np_random(seed)
+        else:
+            rng, seed_value = self.np_random, None
+        pending = draw_safely(
+            lambda: self.setup.prepare_rows(self._table, [0], [rng], [options]), [rng])
+        if seed is not None:
+            self._np_random, self._np_random_seed = rng, seed_value
+        episodes.commit(self._bufs, self._table, pending)
         self._bufs.observe(np.zeros(1, dtype=np.int64))
         ep = self._episode = self._table.episode(0)
         self._ref_len = float(self._table.reference_length[0])

@@ -35,7 +35,31 @@ from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FIL
                      N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
                      T_VIB, T_VIBMAX, T_W, T_X, T_Y)
 
-__all__ = ["EnvSetup", "Buffers", "SetupAccess", "resolve_kernel"]
+__all__ = ["EnvSetup", "Buffers", "SetupAccess", "resolve_kernel", "check_seed", "draw_safely"]
+
+
+def check_seed(seed: Any, what: str = "seed") -> int | None:
+    """``seed`` as a Python int >= 0, or None; anything else (negative, bool, float, text)
+    raises ValueError naming ``what`` (gymnasium's seeding raises its own error type)."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) \
+            or seed < 0:
+        raise ValueError(f"{what} must be None or an integer >= 0 (got {seed!r})")
+    return int(seed)
+
+
+def draw_safely(prepare, rngs: list):
+    """``prepare()`` (which draws from the generators ``rngs``), with the generators put back
+    as they were if it raises: a rejected reset leaves no trace, not even in the random
+    streams, so the next reset draws what it would have drawn."""
+    saved = [(rng, rng.bit_generator.state) for rng in rngs]
+    try:
+        return prepare()
+    except BaseException:
+        for rng, state in saved:
+            rng.bit_generator.state = state
+        raise
 
 
 class Buffers:
@@ -161,6 +185,9 @@ class EnvSetup:
         # with the scene's imbalance
         self.vibration_scale = rotor.reference_amplitudes(sc, self.operating_speed)[0]
         self.vibration_bound = sc.housing_clearance / self.vibration_scale
+        # refuse now a preset whose random episodes would need millions of RK4 steps per
+        # control interval, rather than at an automatic reset in the middle of training
+        episodes.check_preset_stiffness(self)
         self.effort_bound = am.effort_bound(cfg)
         self.n_actions = am.n_actions
         self.n_rows = am.n_rows
@@ -214,14 +241,21 @@ class EnvSetup:
         self.spec = mdl.spec_of(p_nominal, row)
 
     # ------------------------------------------------------------------ episodes
-    def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
-                   rngs: list, options: list | None = None) -> None:
+    def prepare_rows(self, table: episodes.EpisodeTable, rows, rngs: list,
+                     options: list | None = None) -> episodes.Pending:
         """Draw the episodes of ``rows`` (row ``rows[k]`` from generator ``rngs[k]`` with reset
-        options ``options[k]``) and write them, all rows at once."""
+        options ``options[k]``) and compute their start, changing nothing but the generators'
+        states (which a caller rolls back on error): :func:`episodes.commit` writes it."""
         values = [episodes.draw(self, rng, None if options is None else options[k])
                   for k, rng in enumerate(rngs)]
         imbalance, phase, angles, drag, roll = (np.array(v) for v in zip(*values))
-        episodes.write(self, bufs, table, rows, imbalance, phase, angles, drag, roll)
+        return episodes.prepare(self, table, rows, imbalance, phase, angles, drag, roll)
+
+    def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
+                   rngs: list, options: list | None = None) -> None:
+        """Draw the episodes of ``rows`` and write them, all rows at once
+        (:meth:`prepare_rows`, then :func:`episodes.commit`)."""
+        episodes.commit(bufs, table, self.prepare_rows(table, rows, rngs, options))
 
     # ------------------------------------------------------------------ info
     def failure_message(self, code: int, out_row: np.ndarray, st_row: np.ndarray,

@@ -35,7 +35,10 @@ the first observation of the new episode with reward 0 and both flags False.
 ``reset(options=...)`` takes the single environment's options; a value applies to every
 sub-environment, or give one value per sub-environment (an array of length ``num_envs``;
 ``ball_angles`` as an array of shape ``(num_envs, ball_count)``).  ``options["reset_mask"]``
-(boolean array) resets only the selected sub-environments.
+(boolean array) resets only the selected sub-environments.  A reset checks the seeds, the
+mask and every selected sub-environment's options (and the stiffness of its episode) before
+it changes anything: a rejected reset raises ``ValueError`` naming the field and leaves every
+sub-environment and its random generator as they were.
 
 ## Info
 
@@ -49,9 +52,10 @@ reset in that step.
 
 ## Actions
 
-``actions`` of shape ``(num_envs,) + single_action_space.shape``.  Non-finite entries are
-rejected with a ``ValueError`` before anything moves; entries outside [-1, 1] are clipped with
-a one-time warning.
+``actions`` of exactly the shape ``(num_envs,) + single_action_space.shape``: anything else
+(a transposed batch, which reshaping would scramble, a flat array, text) raises a
+``ValueError`` naming both shapes.  Non-finite entries are rejected with a ``ValueError``
+before anything moves; entries outside [-1, 1] are clipped with a one-time warning.
 
 ## Rendering
 
@@ -60,7 +64,7 @@ a one-time warning.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -73,8 +77,9 @@ from .actions import as_action_array
 from .info import check_info_level, masked, step_info
 from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
+from . import episodes
 from .episodes import EpisodeTable
-from .setup import Buffers, EnvSetup, SetupAccess
+from .setup import Buffers, EnvSetup, SetupAccess, check_seed, draw_safely
 
 __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
            "DwellProfileVectorEnv"]
@@ -175,17 +180,25 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None):
+        # everything is checked and computed before any state changes: a rejected reset
+        # (bad seed, option, mask or too stiff an episode in any row) leaves every
+        # sub-environment and its generator as they were
         n = self.num_envs
         if seed is None:
             seeds: list[int | None] = [None] * n
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            super().reset(seed=int(seed))
-            seeds = [int(seed) + i for i in range(n)]
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            first = check_seed(seed)
+            seeds = [first + i for i in range(n)]
         else:
-            seeds = list(seed)
+            if isinstance(seed, (str, bytes)) or not hasattr(seed, "__len__"):
+                raise ValueError(f"seed must be None, an int >= 0 or a list of num_envs = {n} "
+                                 f"seeds (got {seed!r})")
+            seeds = [check_seed(v, f"seed[{k}]") for k, v in enumerate(seed)]
             if len(seeds) != n:
                 raise ValueError(f"seed must be None, an int or a list of num_envs = {n} seeds "
                                  f"(got {len(seeds)})")
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options must be a dict of reset options (got {options!r})")
         options = dict(options) if options else {}
         mask = options.pop("reset_mask", None)
         if mask is None:
@@ -198,11 +211,19 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
             if not self._started and not mask.all():
                 raise ValueError("the first reset() must reset every sub-environment")
             rows = np.flatnonzero(mask)
-        for i in rows:
-            if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i], _ = seeding.np_random(seeds[i])
-        self._reset_rows(rows, [self._options_for(int(i), options) for i in rows]
-                         if options else None)
+        row_options = [self._options_for(int(i), options) for i in rows] if options else None
+        fresh = {int(i): seeding.np_random(seeds[i])[0] for i in rows
+                 if seeds[i] is not None or self._rngs[i] is None}
+        rngs = [fresh[int(i)] if int(i) in fresh else self._rngs[i] for i in rows]
+        kept = [r for i, r in zip(rows, rngs) if int(i) not in fresh]
+        pending = draw_safely(
+            lambda: self.setup.prepare_rows(self._table, rows, rngs, row_options), kept)
+        # commit
+        if isinstance(seed, (int, np.integer)):
+            super().reset(seed=int(seed))
+        for i, rng in fresh.items():
+            self._rngs[i] = rng
+        episodes.commit(self._bufs, self._table, pending)
         self._bufs.observe(rows)
         self._bufs.sort_lanes()
         self._prev_done[rows] = False
@@ -218,7 +239,10 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         n = self.num_envs
         nb = self.setup.scene.ball_count
         for key, value in options.items():
-            arr = np.asarray(value) if not isinstance(value, str) else None
+            try:
+                arr = np.asarray(value) if not isinstance(value, str) else None
+            except (TypeError, ValueError):  # ragged lists: draw() names the option
+                arr = None
             if key == "ball_angles" and arr is not None and arr.ndim == 2:
                 if arr.shape[0] != n:
                     raise ValueError(f"reset option 'ball_angles' must have shape ({nb},) or "
@@ -233,10 +257,10 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
                 out[key] = value
         return out
 
-    def _reset_rows(self, rows: np.ndarray, options: list | None = None) -> None:
-        """Draw and write the episodes of ``rows`` (all at once)."""
-        self.setup.reset_rows(self._bufs, self._table, rows, [self._rngs[i] for i in rows],
-                              options)
+    def _reset_rows(self, rows: np.ndarray) -> None:
+        """Draw and write new episodes of ``rows`` (the automatic reset: no options, and a
+        preset whose episodes all suit the integrator, so it cannot be refused)."""
+        self.setup.reset_rows(self._bufs, self._table, rows, [self._rngs[i] for i in rows])
 
     def step(self, actions):
         if not self._started:

@@ -162,6 +162,30 @@ def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, prese
             for a in range(0, episodes, chunk_size)]
 
 
+def env_ids() -> list[str]:
+    """The registered abb-gym environment ids (those a chunk can run)."""
+    return sorted(k for k in gym.registry if k.startswith("abb_gym/"))
+
+
+def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
+                 policy: str | None = None, **env_kwargs: Any) -> None:
+    """Check in this process what every task of an evaluation or a sweep will use, before any
+    is dispatched: the environment id, the seed (an int >= 0: episode k is seed + k), the
+    scene, the preset and the keywords (by making one sub-environment, which compiles
+    nothing), and the policy (``replay:`` specs down to the recorded one).  Raises ValueError
+    naming the input, so a bad one is one error, not the same error from every task."""
+    from ..envs.setup import check_seed
+    if not isinstance(env_id, str) or env_id not in gym.registry \
+            or not env_id.startswith("abb_gym/"):
+        raise ValueError(f"unknown environment {env_id!r}; use one of {env_ids()}")
+    check_seed(seed, "seed")
+    make_env(env_id, scene, preset, 1, **env_kwargs).close()
+    spec = policy
+    while spec is not None:
+        resolve(spec, env_id, scene)
+        spec = spec[len("replay:"):] if spec.startswith("replay:") else None
+
+
 def _run_chunk_task(chunk: Chunk):
     """(episodes, rollouts, the policy's parameters) of one chunk."""
     policy = resolve(chunk.policy, chunk.env_id, chunk.scene)
@@ -175,7 +199,9 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     """Evaluate ``policy`` (``baseline:NAME`` or ``ppo:PATH``) on the seeded test set.
 
     ``executor`` (:class:`abb_gym.execution.Executor`) runs the chunks in parallel; None runs
-    them in this process (the vector environment already uses both cores)."""
+    them in this process (the vector environment already uses both cores).  Every input is
+    checked before any chunk runs (:func:`check_inputs`)."""
+    check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
     if executor is None:  # this process; the vector environment already uses every core

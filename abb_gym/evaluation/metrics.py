@@ -23,9 +23,10 @@ metric                    unit     definition
 ``time_above_band``       s        time spent above the operating band (overspeed)
 ``ball_settling_time``    s        time after the settled entry until every ball angle stays
                                    within ``angle_tol`` of its final value (NaN if never)
-``residual_imbalance``    -        ``|U0 + sum m_i (E e^(i gam) + R e^(i ph_i))|`` / U0 at the
-                                   end (:mod:`abb_gym.physics.rotor`)
-``balanced``              bool     residual imbalance within ``balance_tol`` U0 of the best the
+``residual_imbalance``    -        ``|U0 + sum m_i (E e^(i gam) + R e^(i ph_i))|`` / U at the
+                                   end, U = max(U0, 0.1 sum m_i R) (:func:`abb_gym.physics.
+                                   rotor.imbalance_scale`: finite down to U0 = 0)
+``balanced``              bool     residual imbalance within ``balance_tol`` U of the best the
                                    balls can reach (unequal balls and race eccentricity included)
 ``nonsynchronous_whirl``  bool     after the critical speed some ball slips more than a full
                                    revolution behind the rotor: it circulates, not settles

@@ -7,7 +7,7 @@
   critical speed against the race drag c_b, one curve per ball mass, without (5.5) and with
   (5.11) the 0.5 s constant-speed dwell.
 
-Both start the balls at 0/0 deg (Yoshida's Figs. 4.1/4.7 case) and run one ``simulate`` per
+Both start every ball at 0 deg (Yoshida's Figs. 4.1/4.7 case: 0/0) and run one ``simulate`` per
 point; the sweeps are small (tens of runs of a few ms) and show a progress bar.
 
 The ``plot_*`` functions write the chart and, next to it, its data as CSV (same name,
@@ -29,12 +29,21 @@ ACCEL_DWELL = 20.0  # rad/s^2, his constant-acceleration dwell (Fig. 4.15)
 Y_FLOOR = -1080.0  # deg, three revolutions: lower positions are drawn on the floor, labelled
 
 
+def _settling_drive(scene, dwell_time: float, dwell_accel: float) -> SpeedProfile:
+    """Ramp at ACCEL [rad/s^2] to the critical speed, then a ``dwell_time`` [s] dwell at
+    ``dwell_accel`` [rad/s^2] (raises ValueError for an impossible profile)."""
+    return SpeedProfile.dwell(ACCEL, scene.critical_speed, dwell_time, dwell_accel)
+
+
 def settling_period(scene, dwell_time: float, dwell_accel: float,
-                    ball_angles0=(0.0, 0.0), horizon: float = 3.0) -> float:
+                    ball_angles0=None, horizon: float = 3.0) -> float:
     """Time [s] from the dwell start (at the critical speed) until a ball first reaches
-    -180 deg; NaN if none does within ``horizon`` s after the dwell."""
+    -180 deg; NaN if none does within ``horizon`` s after the dwell.  ``ball_angles0`` [rad]:
+    default every ball at 0 (Yoshida's 0/0 case)."""
     t_s = scene.critical_speed / ACCEL
-    drive = SpeedProfile.dwell(ACCEL, scene.critical_speed, dwell_time, dwell_accel)
+    drive = _settling_drive(scene, dwell_time, dwell_accel)
+    if ball_angles0 is None:
+        ball_angles0 = np.zeros(scene.ball_count)
     tr = simulate(scene, drive, t_s + dwell_time + horizon, ball_angles0=ball_angles0,
                   output_dt=1e-3)
     hit = np.nonzero(np.min(tr.ball_angles, axis=1) <= -math.pi)[0]
@@ -56,20 +65,25 @@ def _map(fn, tasks, desc, progress, executor):
 def settling_study(scene_name: str = "yoshida_odd",
                    dwell_times=(0.3, 0.4, 0.5, 0.6, 0.7, 0.8),
                    progress: bool = True, executor=None) -> list[dict]:
-    """Rows of (dwell kind, dwell length, settling period); ``executor`` as in
-    :mod:`abb_gym.execution` (None: this process)."""
+    """Rows of (dwell kind, dwell length [s], settling period [s]); ``executor`` as in
+    :mod:`abb_gym.execution` (None: this process).  Every input is checked before any run
+    starts (a bad scene or dwell length is one ValueError, not one per task)."""
     todo = [(scene_name, kind, acc, tc) for kind, acc in (("constant speed", 0.0),
                                                           ("constant acceleration", ACCEL_DWELL))
             for tc in dwell_times]
+    scene = load_scene(scene_name)
+    for _, _, acc, tc in todo:
+        _settling_drive(scene, tc, acc)
     return _map(_settling_task, todo, "settling study", progress, executor)
 
 
 def ball_position_after_critical(scene, with_dwell: bool, after: float = 2.5) -> float:
-    """The lowest ball angle [deg] ``after`` s after the critical speed (balls from 0/0)."""
+    """The lowest ball angle [deg] ``after`` s after the critical speed (balls from 0)."""
     t_c = scene.critical_speed / ACCEL
     drive = (SpeedProfile.dwell(ACCEL, scene.critical_speed, 0.5) if with_dwell
              else SpeedProfile.ramp(ACCEL))
-    tr = simulate(scene, drive, t_c + after, ball_angles0=(0.0, 0.0), output_dt=0.01)
+    tr = simulate(scene, drive, t_c + after, ball_angles0=np.zeros(scene.ball_count),
+                  output_dt=0.01)
     return float(np.degrees(tr.ball_angles[-1].min()))
 
 
@@ -84,8 +98,13 @@ def _position_task(task) -> dict:
 def ball_position_study(scene_name: str = "yoshida_odd", masses=(0.5e-3, 1e-3, 1.5e-3, 2e-3),
                         drags=(0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0),
                         progress: bool = True, executor=None) -> list[dict]:
-    """Rows of (profile, ball mass, race drag, ball angle 2.5 s after the critical speed)."""
+    """Rows of (profile, ball mass [g], race drag [N s/m], ball angle [deg] 2.5 s after the
+    critical speed).  Every input is checked before any run starts."""
     todo = [(scene_name, dw, m, c) for dw in (False, True) for m in masses for c in drags]
+    load_scene(scene_name)  # the scene's own message for a bad name, before the fields'
+    for m in masses:
+        for c in drags:
+            load_scene(scene_name, ball_mass=m, ball_drag=c)
     return _map(_position_task, todo, "ball position study", progress, executor)
 
 
