@@ -17,7 +17,7 @@ from gymnasium import logger
 from gymnasium.utils import seeding
 
 from .actions import as_action_array
-from .info import check_info_level, step_info
+from .info import check_display, step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
@@ -193,10 +193,7 @@ class BalancerEnv(SetupAccess, gym.Env):
                  observe_balls: bool = False, render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
                  info_level: str = "lean", **overrides: Any):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of "
-                             f"{self.metadata['render_modes']} (got {render_mode!r})")
-        self.info_level = check_info_level(info_level)
+        self.info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
         self.observation_space = self.setup.observation_space

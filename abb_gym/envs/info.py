@@ -15,7 +15,7 @@ from ..physics import runup
 from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
                      TERM_NAMES)
 
-__all__ = ["step_info", "masked", "INFO_LEVELS", "check_info_level"]
+__all__ = ["step_info", "masked", "INFO_LEVELS", "check_info_level", "check_display"]
 
 INFO_LEVELS = ("lean", "full")
 
@@ -25,6 +25,15 @@ def check_info_level(level: Any) -> str:
     if level not in INFO_LEVELS:
         raise ValueError(f"info_level must be one of {INFO_LEVELS} (got {level!r})")
     return level
+
+
+def check_display(render_mode: Any, render_modes: list[str], info_level: Any) -> str:
+    """The checks of the single and the vector environment's ``render_mode`` and
+    ``info_level`` arguments; returns the info level."""
+    if render_mode is not None and render_mode not in render_modes:
+        raise ValueError(f"render_mode must be None or one of {render_modes} "
+                         f"(got {render_mode!r})")
+    return check_info_level(info_level)
 
 # key -> (buffer, column, conversion): the one definition of every per-step key
 #   "value": the entry; "bool": entry != 0; "times_dt": entry x control interval [s];

@@ -74,7 +74,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import as_action_array
-from .info import check_info_level, masked, step_info
+from .info import check_display, masked, step_info
 from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
 from . import episodes
@@ -101,10 +101,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of "
-                             f"{self.metadata['render_modes']} (got {render_mode!r})")
-        self.info_level = check_info_level(info_level)
+        self.info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
         self.num_envs = int(num_envs)
