@@ -1,5 +1,6 @@
 # Two commands do everything on a fresh machine:
-#   make demo   - create .venv, install abb-gym, run the main demonstration (figures in out/demo)
+#   make demo   - create .venv, install abb-gym alone (no torch, no Ray), run the main
+#                 demonstration (figures in out/demo)
 #   make test   - create .venv, install abb-gym with its training and test extras (SB3, CPU
 #                 torch, Ray), run the default test suite
 # Long runs (training, sweeps) are opt-in: make test-slow, make bench.
@@ -14,13 +15,21 @@ PIP_INSTALL := $(PIP) install -q -c constraints.txt
 
 setup: $(VENV)/.installed
 
-$(VENV)/.installed: pyproject.toml constraints.txt
+$(VENV)/.created:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
+	touch $@
+
+# the demo needs the package and its core dependencies only
+$(VENV)/.installed-core: $(VENV)/.created pyproject.toml constraints.txt
+	$(PIP_INSTALL) -e .
+	touch $@
+
+$(VENV)/.installed: $(VENV)/.created pyproject.toml constraints.txt
 	$(PIP_INSTALL) -e ".[train,test]"
 	touch $@
 
-demo: setup
+demo: $(VENV)/.installed-core
 	$(PY) -m abb_gym.cli demo --out out/demo
 
 test: setup

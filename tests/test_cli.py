@@ -147,3 +147,24 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     assert proc.wait(timeout=600) == 141, err
     assert head == b'{"scene": '
     assert "Traceback" not in err and "BrokenPipe" not in err and "Exception ignored" not in err
+
+
+def test_help_shows_version_every_method_defaults_and_no_rest_markup(capsys):
+    from abb_gym import __version__
+    from abb_gym.cli import build_parser
+    from abb_gym.physics.simulate import METHODS
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.strip() == f"abb-gym {__version__}"
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name, p in sub.choices.items():
+        text = p.format_help()
+        assert "``" not in text and "::\n" not in text, name
+        assert "(default: None)" not in text, name
+    simulate_help = sub.choices["simulate"].format_help()
+    assert all(m in simulate_help for m in METHODS)
+    assert "(default: rk4)" in simulate_help
+    # the examples of a description keep their lines
+    assert "\n    abb-gym tune-baselines --scene yoshida_odd" in \
+        sub.choices["tune-baselines"].format_help()

@@ -30,9 +30,33 @@ SUBCOMMANDS = [
 ]
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Descriptions as written (their examples keep their lines) but without the docstrings'
+    reST markup; options with their defaults, where there is one worth showing."""
+
+    def _format_text(self, text):
+        return super()._format_text(text.replace("``", "").replace("::\n", ":\n"))
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default in (None, False, [], argparse.SUPPRESS) or "default" in text:
+            return text
+        return super()._get_help_string(action)
+
+
+def _with_defaults(parser: argparse.ArgumentParser) -> None:
+    parser.formatter_class = HelpFormatter
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _with_defaults(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
     parser = argparse.ArgumentParser(
         prog="abb-gym", description="Automatic ball balancer simulator and Gymnasium suite")
+    parser.add_argument("--version", action="version", version=f"abb-gym {__version__}")
     parser.add_argument("--configs", action="append", default=[], metavar="DIR",
                         help="a folder of your own scenes/, envs/, baselines/, ppo/ and "
                              "agents/, searched before the shipped ones (repeatable; also "
@@ -40,6 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
         importlib.import_module(name).register(sub)
+    _with_defaults(parser)
     return parser
 
 

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from ..physics import MotorDrive, SpeedProfile, load_scene, simulate
+from ..physics.simulate import METHODS
 from ..tables import markdown_table
 
 
@@ -46,8 +47,11 @@ def register(sub) -> None:
     p.add_argument("--t-end", type=float, default=6.0, help="simulated time [s]")
     p.add_argument("--ball-angles-deg", type=float, nargs="+", default=None,
                    help="initial ball angles [deg] (default: the scene's)")
-    p.add_argument("--method", default="rk4", help="rk4 or a solve_ivp method (DOP853, Radau)")
-    p.add_argument("--dt", type=float, default=None, help="RK4 step [s]")
+    p.add_argument("--method", default="rk4", choices=METHODS,
+                   help="compiled rk4, etdrk4 (stiff drag), ros2 (any stiffness), dopri5 "
+                        "(adaptive), or a solve_ivp method")
+    p.add_argument("--dt", type=float, default=None,
+                   help="fixed step [s] (default: the method's stability and accuracy limit)")
     p.add_argument("--output-dt", type=float, default=None, help="output interval [s]")
     p.add_argument("--plot", default=None, help="write a PNG of the run to this path")
     p.add_argument("--json", nargs="?", const="-", default=None, metavar="PATH",
