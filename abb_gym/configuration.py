@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import stat
 from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
@@ -40,6 +41,9 @@ from typing import Any, Callable, Iterable, Mapping
 __all__ = ["ConfigError", "Spec", "declare", "specs", "check", "bounds_text", "fields_table",
            "read_yaml", "locate", "parse_assignments", "parse_yaml_value", "build",
            "parse_python_literal"]
+
+
+MAX_FILE_BYTES = 4 * 1024 * 1024  # a configuration file is a few kB; more is a wrong file
 
 
 class ConfigError(ValueError):
@@ -106,15 +110,25 @@ def bounds_text(spec: Spec) -> str:
     return text + ("" if spec.unit in ("", "-") else f" [{spec.unit}]")
 
 
+def is_bool(value: Any) -> bool:
+    """True for Python and numpy booleans, which are never numbers here (``true`` in a YAML
+    file or ``np.True_`` would otherwise pass as 1.0)."""
+    kind = type(value)
+    return isinstance(value, bool) or (kind.__module__ == "numpy"
+                                       and kind.__name__ in ("bool", "bool_"))
+
+
 def _number(spec: Spec, value: Any) -> float | None:
     """``value`` as a float within ``spec``'s bounds, or None if it is not one."""
-    if isinstance(value, bool) or value is None:
+    if is_bool(value) or value is None or isinstance(value, (bytes, bytearray)):
         return None
     if isinstance(value, str):
         try:
             value = float(value.strip())
         except ValueError:
             return None
+    if getattr(value, "ndim", 0) != 0:  # float() of a one-element array is deprecated
+        return None
     try:
         v = float(value)
     except (TypeError, ValueError, OverflowError):
@@ -136,7 +150,7 @@ def check(where: str, name: str, value: Any, spec: Spec,
 
     def fail(what: str | None = None) -> None:
         raise error(f"{prefix}field {name!r} must be {what or bounds_text(spec)} "
-                    f"(got {value!r})")
+                    f"(got {_short(repr(value))})")
 
     if value is None:
         if spec.nullable:
@@ -154,7 +168,10 @@ def check(where: str, name: str, value: Any, spec: Spec,
             fail()
         return value
     if kind == "choice":
-        if value not in spec.choices:
+        # compared one by one: ``value in choices`` is ambiguous for an array and true for
+        # True against a choice 1
+        if not any((isinstance(value, str) and isinstance(c, str) or type(value) is type(c))
+                   and value == c for c in spec.choices):
             fail()
         return value
     if kind == "range":
@@ -221,17 +238,34 @@ def read_yaml(path: str | os.PathLike, what: str, error: type[ValueError] = Conf
     import yaml
 
     p = Path(path)
-    label = f"{what} file {str(p)!r}"
-    if not p.exists():
-        raise error(f"{label} does not exist")
-    if p.is_dir():
-        raise error(f"{label} is a directory, not a YAML file")
+    label = f"{what} file {_short(str(p))!r}"
     try:
-        text = p.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise error(f"{label} is not UTF-8 text (a binary file?)") from None
+        info = p.stat()
+    except FileNotFoundError:
+        raise error(f"{label} does not exist") from None
+    except (OSError, ValueError) as exc:  # too long, a NUL in the name, no permission
+        raise error(f"{label} cannot be opened: {getattr(exc, 'strerror', None) or exc}") \
+            from None
+    if stat.S_ISDIR(info.st_mode):
+        raise error(f"{label} is a directory, not a YAML file")
+    if not stat.S_ISREG(info.st_mode):
+        # a device or a pipe (/dev/zero, /dev/stdin) would block or never end
+        raise error(f"{label} is not a regular file (a device or a pipe?)")
+    if info.st_size > MAX_FILE_BYTES:
+        raise error(f"{label} is {info.st_size} bytes; configuration files are at most "
+                    f"{MAX_FILE_BYTES} bytes")
+    try:
+        with open(p, "rb") as fh:
+            data_bytes = fh.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise error(f"{label} cannot be read: {exc.strerror or exc}") from None
+    if len(data_bytes) > MAX_FILE_BYTES:  # grew since stat() (or /proc-like size 0)
+        raise error(f"{label} is larger than {MAX_FILE_BYTES} bytes; configuration files "
+                    f"are smaller")
+    try:
+        text = data_bytes.decode("utf-8")
+    except UnicodeDecodeError:
+        raise error(f"{label} is not UTF-8 text (a binary file?)") from None
     if "\x00" in text:
         raise error(f"{label} is not UTF-8 text (a binary file?)")
     try:
@@ -246,25 +280,50 @@ def read_yaml(path: str | os.PathLike, what: str, error: type[ValueError] = Conf
     return data
 
 
+def _short(text: str, limit: int = 200) -> str:
+    """``text`` cut to ``limit`` characters for a message (a fuzzed 5000-character name must
+    not flood the terminal)."""
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()`` that is False, not an OSError, for names the system refuses (too
+    long, NUL bytes, unencodable characters)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def locate(kind: str, name_or_path: str | os.PathLike, what: str,
            error: type[ValueError] = ConfigError) -> Path:
     """The file a name (on the search path of ``kind``, :mod:`abb_gym.resources`) or a path
-    refers to; unknown names raise ``error`` listing the available ones."""
+    refers to; unknown names raise ``error`` listing the available ones.  Every failure,
+    including an empty name (which must not read ``.``), a directory and a name the system
+    refuses, is ``error`` naming the path; the file itself is checked by :func:`read_yaml`."""
     from . import resources
 
     text = os.fspath(name_or_path) if isinstance(name_or_path, os.PathLike) else name_or_path
     if not isinstance(text, str) or not text.strip():
-        raise error(f"{what} must be a name or a path (got {name_or_path!r}); available: "
-                    f"{', '.join(resources.names(kind))}")
+        raise error(f"{what} must be a name or a path (got {_short(repr(name_or_path))}); "
+                    f"available: {', '.join(resources.names(kind))}")
     path = Path(text)
     looks_like_path = text.endswith((".yaml", ".yml")) or os.sep in text or "/" in text
-    if looks_like_path or path.is_file():
-        if not path.exists():
-            raise error(f"{what} file {text!r} does not exist")
+    if looks_like_path or _is_file(path):
+        try:
+            exists = path.exists()
+        except (OSError, ValueError) as exc:
+            raise error(f"{what} file {_short(text)!r} cannot be opened: "
+                        f"{getattr(exc, 'strerror', None) or exc}") from None
+        if not exists:
+            raise error(f"{what} file {_short(text)!r} does not exist")
         return path
-    found = resources.find(kind, text)
+    try:
+        found = resources.find(kind, text)
+    except (OSError, ValueError):
+        found = None
     if found is None:
-        raise error(f"unknown {what} {text!r}; available: "
+        raise error(f"unknown {what} {_short(text)!r}; available: "
                     f"{', '.join(resources.names(kind)) or 'none'} (or give a path to a "
                     f"YAML file)")
     return found

@@ -32,28 +32,82 @@ integrators never step across a jump of the acceleration.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from ..configuration import is_bool
 from . import drive_law as dl
-
-from .scene import Scene
+from .scene import ANGLE_LIMIT, Scene
 
 __all__ = ["SpeedProfile", "MotorDrive"]
 
 
-def _finite(name: str, value: float, *, positive: bool = False, nonneg: bool = False,
-            unit: str = "") -> float:
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite [{unit}] (got {value!r})")
-    if positive and v <= 0:
-        raise ValueError(f"{name} must be > 0 [{unit}] (got {v})")
-    if nonneg and v < 0:
-        raise ValueError(f"{name} must be >= 0 [{unit}] (got {v})")
+def _finite(name: str, value: Any, *, positive: bool = False, nonneg: bool = False,
+            unit: str = "", limit: float | None = None) -> float:
+    """``value`` as a finite float, or a ValueError naming ``name``, the allowed range and the
+    unit.  Only real numbers are accepted: None, text, booleans and sequences are refused
+    (``float("40")`` or ``float(True)`` would silently make a number of them)."""
+    if limit is not None:
+        allowed = f"in [0, {limit:g}]" if nonneg else f"in [-{limit:g}, {limit:g}]"
+    elif positive:
+        allowed = "> 0"
+    elif nonneg:
+        allowed = ">= 0"
+    else:
+        allowed = "finite"
+    where = f"{name} must be {allowed}" + (f" [{unit}]" if unit else "")
+    if (value is None or is_bool(value) or isinstance(value, (str, bytes))
+            or getattr(value, "ndim", 0) != 0):
+        raise ValueError(f"{where} (a real number; got {value!r:.80})")
+    try:
+        v = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{where} (a real number; got {value!r:.80})") from None
+    if (not math.isfinite(v) or (positive and v <= 0) or (nonneg and v < 0)
+            or (limit is not None and abs(v) > limit)):
+        raise ValueError(f"{where} (got {v!r})")
     return v
+
+
+def _angle(name: str, value: Any) -> float:
+    """An initial angle [rad] within the scenes' ``ANGLE_LIMIT`` (beyond it the rounding of the
+    angle changes the machine: sin(1e16) is not sin(1e16 mod 2 pi))."""
+    return _finite(name, value, unit="rad", limit=ANGLE_LIMIT)
+
+
+def is_sequence(value: Any) -> bool:
+    """True for a list-like value whose entries can be listed: not text, not a mapping, not
+    a 0-d array (which claims to be iterable but is not)."""
+    return (isinstance(value, Iterable) and not isinstance(value, (str, bytes, Mapping))
+            and getattr(value, "ndim", 1) != 0)
+
+
+def _segments(value: Any) -> tuple[tuple[float, float], ...]:
+    """``segments`` as a tuple of (duration [s], acceleration [rad/s^2]) pairs of floats."""
+    what = ("segments must be a sequence of (duration [s], acceleration [rad/s^2]) pairs, "
+            "e.g. [(2.5, 40.0), (1.0, 0.0)]")
+    if not is_sequence(value):
+        raise ValueError(f"{what} (got {value!r:.80})")
+    segs = []
+    items = list(value)
+    for k, seg in enumerate(items):
+        if not is_sequence(seg):
+            raise ValueError(f"segments[{k}] must be a pair (duration [s], acceleration "
+                             f"[rad/s^2]) (got {seg!r:.80}); {what}")
+        pair = list(seg)
+        if len(pair) != 2:
+            raise ValueError(f"segments[{k}] must be (duration, acceleration), got {seg!r:.80}")
+        forever = (isinstance(pair[0], numbers.Real) and not is_bool(pair[0])
+                   and pair[0] == math.inf)
+        if forever and k != len(items) - 1:
+            raise ValueError(f"segments[{k}] duration is infinite; only the last may be")
+        dur = math.inf if forever else _finite(f"segments[{k}] duration", pair[0],
+                                               nonneg=True, unit="s")
+        segs.append((dur, _finite(f"segments[{k}] acceleration", pair[1], unit="rad/s^2")))
+    return tuple(segs)
 
 
 @dataclass(frozen=True)
@@ -70,35 +124,35 @@ class SpeedProfile:
     initial_angle: float = 0.0
 
     def __post_init__(self) -> None:
-        segs = []
-        for k, seg in enumerate(self.segments):
-            if len(seg) != 2:
-                raise ValueError(f"segments[{k}] must be (duration, acceleration), got {seg!r}")
-            dur, acc = float(seg[0]), float(seg[1])
-            if math.isnan(dur) or dur < 0:
-                raise ValueError(f"segments[{k}] duration must be >= 0 [s] (got {dur})")
-            if math.isinf(dur) and k != len(self.segments) - 1:
-                raise ValueError(f"segments[{k}] duration is infinite; only the last may be")
-            segs.append((dur, _finite(f"segments[{k}] acceleration", acc, unit="rad/s^2")))
-        object.__setattr__(self, "segments", tuple(segs))
-        _finite("initial_speed", self.initial_speed, unit="rad/s")
-        _finite("initial_angle", self.initial_angle, unit="rad")
+        segs = _segments(self.segments)
+        object.__setattr__(self, "segments", segs)
         # a speed profile that turns the rotor backwards is almost always a typo
-        speed = self.initial_speed
+        speed = _finite("initial_speed", self.initial_speed, nonneg=True, unit="rad/s")
+        object.__setattr__(self, "initial_speed", speed)
+        angle = _angle("initial_angle", self.initial_angle)
+        object.__setattr__(self, "initial_angle", angle)
         for k, (dur, acc) in enumerate(segs):
             end = speed + acc * dur if math.isfinite(dur) else (speed if acc == 0 else
                                                                  math.copysign(math.inf, acc))
             if end < -1e-12:
                 raise ValueError(f"segments[{k}] drives the rotor speed negative "
                                  f"({speed:g} rad/s with {acc:g} rad/s^2 for {dur:g} s)")
+            if math.isfinite(dur):
+                # the exact quadratics of the kernels need finite speeds and angles at every
+                # segment start
+                angle += speed * dur + 0.5 * acc * dur * dur
+                if not (math.isfinite(end) and math.isfinite(angle)):
+                    raise ValueError(f"segments[{k}] ({dur:g} s at {acc:g} rad/s^2) takes the "
+                                     f"rotor speed or angle beyond floating point; use "
+                                     f"shorter durations or smaller accelerations")
             speed = end
 
     # ------------------------------------------------------------------ constructors
     @classmethod
     def constant(cls, speed: float, angle: float = 0.0) -> "SpeedProfile":
         """Constant speed [rad/s] from t = 0."""
-        _finite("speed", speed, nonneg=True, unit="rad/s")
-        return cls(segments=(), initial_speed=speed, initial_angle=angle)
+        speed = _finite("speed", speed, nonneg=True, unit="rad/s")
+        return cls(segments=(), initial_speed=speed, initial_angle=_angle("angle", angle))
 
     @classmethod
     def ramp(cls, accel: float, operating_speed: float | None = None) -> "SpeedProfile":
@@ -124,6 +178,10 @@ class SpeedProfile:
         dwell_time = _finite("dwell_time", dwell_time, nonneg=True, unit="s")
         dwell_accel = _finite("dwell_accel", dwell_accel, unit="rad/s^2")
         after = dwell_speed + dwell_accel * dwell_time
+        if after < -1e-12:
+            raise ValueError(f"dwell_accel = {dwell_accel:g} rad/s^2 for dwell_time = "
+                             f"{dwell_time:g} s drives the rotor speed negative from "
+                             f"dwell_speed = {dwell_speed:g} rad/s (to {after:g} rad/s)")
         segs = [(dwell_speed / accel, accel), (dwell_time, dwell_accel)]
         if operating_speed is None:
             segs.append((math.inf, accel))
@@ -157,7 +215,8 @@ class SpeedProfile:
 
     def _evaluate(self, t):
         t = np.asarray(t, dtype=float)
-        th, w, alpha = dl.prescribed_profile(np.atleast_1d(t).ravel(), self.segment_table(math.inf)[1])
+        th, w, alpha = dl.prescribed_profile(np.atleast_1d(t).ravel(),
+                                             self.segment_table(math.inf)[1])
         if t.ndim == 0:
             return th[0], w[0], alpha[0]
         return th.reshape(t.shape), w.reshape(t.shape), alpha.reshape(t.shape)
@@ -180,7 +239,8 @@ class SpeedProfile:
         ts = np.concatenate([t0[t0 <= t_end], [t_end]])
         return float(np.max(np.abs(self.speed(ts))))
 
-    def segment_table(self, t_end: float, scene: Scene | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def segment_table(self, t_end: float, scene: Scene | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """(segment start times, drive rows) for the kernels, covering [0, t_end]."""
         t0, th0, w0, acc = self._table()
         keep = t0 < t_end
@@ -219,18 +279,29 @@ class MotorDrive:
     power_limit: float | None = None
 
     def __post_init__(self) -> None:
+        # every field is stored as the float it was checked as (an int or numpy scalar
+        # passed in must not reach the kernels' tables as something else)
+        def put(name: str, value: float | None) -> None:
+            object.__setattr__(self, name, value)
+
         if self.no_load_speed is not None:
-            _finite("no_load_speed", self.no_load_speed, positive=True, unit="rad/s")
+            put("no_load_speed", _finite("no_load_speed", self.no_load_speed, positive=True,
+                                         unit="rad/s"))
         if self.power_limit is not None:
-            _finite("power_limit", self.power_limit, positive=True, unit="W")
-        _finite("torque", self.torque, unit="N m")
-        _finite("speed_gain", self.speed_gain, nonneg=True, unit="N m s")
+            put("power_limit", _finite("power_limit", self.power_limit, positive=True,
+                                       unit="W"))
+        put("torque", _finite("torque", self.torque, unit="N m"))
+        put("speed_gain", _finite("speed_gain", self.speed_gain, nonneg=True, unit="N m s"))
         if not isinstance(self.target, SpeedProfile):
-            _finite("target", self.target, unit="rad/s")
+            # the rotor spins in the positive sense throughout (ball angles lag from the
+            # imbalance); a speed profile enforces the same
+            put("target", _finite("target", self.target, nonneg=True, unit="rad/s"))
         if self.torque_limit is not None:
-            _finite("torque_limit", self.torque_limit, positive=True, unit="N m")
-        _finite("initial_speed", self.initial_speed, unit="rad/s")
-        _finite("initial_angle", self.initial_angle, unit="rad")
+            put("torque_limit", _finite("torque_limit", self.torque_limit, positive=True,
+                                        unit="N m"))
+        put("initial_speed", _finite("initial_speed", self.initial_speed, nonneg=True,
+                                     unit="rad/s"))
+        put("initial_angle", _angle("initial_angle", self.initial_angle))
 
     @classmethod
     def constant_torque(cls, torque: float, torque_limit: float | None = None) -> "MotorDrive":

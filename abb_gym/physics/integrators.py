@@ -42,6 +42,7 @@ from .specialise import Specialised
 STATUS_OK = 0
 STATUS_NONFINITE = 1
 STATUS_STEP_UNDERFLOW = 2
+STATUS_WORK_LIMIT = 3  # solve_ivp used more right-hand sides than it was allowed
 
 METHOD_RK4 = 0
 METHOD_DOPRI5 = 1
@@ -457,10 +458,17 @@ def rk4_run(s0, t_out, seg_t, seg_d, p, b, dt_max, out):
                        b.shape[0], mdl.spec_of(p, seg_d))
 
 
-def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1e-12, out=None):
+class _WorkLimit(Exception):
+    """Raised inside solve_ivp's right-hand side when the evaluation budget is spent."""
+
+
+def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1e-12, out=None,
+              max_nfev=None):
     """Reference integration with ``solve_ivp`` restarted at every segment start.
 
-    Returns (status, failure time, failing index, right-hand-side evaluations).
+    Returns (status, failure time, failing index, right-hand-side evaluations).  With
+    ``max_nfev`` the run stops with :data:`STATUS_WORK_LIMIT` once it has evaluated the
+    right-hand side that often (solve_ivp itself has no bound on its work).
     """
     n = s0.shape[0]
     nq = n // 2
@@ -471,6 +479,7 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
     s = np.array(s0, dtype=float)
     bounds = [t_out[0]] + [t for t in seg_t if t_out[0] < t < t_out[-1]] + [t_out[-1]]
     nfev = 0
+    calls = [0, t_out[0]]  # right-hand sides evaluated in all pieces, the last time seen
     for a, z in zip(bounds[:-1], bounds[1:]):
         j = int(np.searchsorted(seg_t, a + 1e-12 * (1 + abs(a)), side="right") - 1)
         d = seg_d[max(j, 0)]
@@ -479,6 +488,11 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
             out[0] = s
 
         def rhs(t, y, d=d):
+            # every call counts, the Jacobian's finite differences too (sol.nfev omits them)
+            calls[0] += 1
+            calls[1] = t
+            if max_nfev is not None and calls[0] > max_nfev:
+                raise _WorkLimit
             ds = np.empty(n)
             mdl.state_derivative(t, np.ascontiguousarray(y), p, b, d, ds, spec)
             return ds
@@ -487,8 +501,12 @@ def scipy_run(s0, t_out, seg_t, seg_d, p, b, method="DOP853", rtol=1e-10, atol=1
         t_eval = t_out[mask]
         if not (len(t_eval) and t_eval[-1] == z):
             t_eval = np.append(t_eval, z)
-        with np.errstate(over="ignore"):  # scipy's finite-difference Jacobian probes far out
-            sol = solve_ivp(rhs, (a, z), s, method=method, rtol=rtol, atol=atol, t_eval=t_eval)
+        try:
+            with np.errstate(over="ignore"):  # scipy's finite-difference Jacobian probes far
+                sol = solve_ivp(rhs, (a, z), s, method=method, rtol=rtol, atol=atol,
+                                t_eval=t_eval)
+        except _WorkLimit:
+            return STATUS_WORK_LIMIT, float(calls[1]), 0, calls[0]
         nfev += sol.nfev
         if sol.status != 0 or not np.all(np.isfinite(sol.y)):
             finite = np.all(np.isfinite(sol.y), axis=0)

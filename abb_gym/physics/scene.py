@@ -15,9 +15,17 @@ keep every value in the range where the compiled model is meaningful and finite)
 {table}
 
 Cross-field rules: every ball radius < ``race_radius``, the race eccentricity <
-``race_radius``, ``friction_static`` 0 or >= ``friction_kinetic``, a non-linear drag law or a
-virtual mass needs a fluid, and with ball contact the balls must fit in the race without
-overlapping at their initial angles.
+``race_radius``, each rolling resistance <= its ball's radius, the rotor and race
+eccentricities 0 or >= 1e-12 m (either may divide the whirl as the reference length),
+``friction_static`` 0 or >= ``friction_kinetic``, a non-linear drag law or a virtual mass needs
+a fluid, and with ball contact the balls must fit in the race without overlapping at their
+initial angles.
+
+The bounds keep every accepted scene usable by the compiled model: no division by zero, no
+subnormal scale (the drive's smallest acceleration, speed and torque, the rotor's inertia and
+the housing clearance are bounded away from 0), and every remaining stiffness (heavy drag,
+tiny balls, stiff contact or support damping) is caught by the step rules and work bound of
+:func:`~abb_gym.physics.simulate.simulate`, which then names a method that can take it.
 
 Effects are switched on by their parameters, every one off by default: a scene whose rolling
 resistance, race eccentricity, gravity, contact stiffness, fluid drag law, virtual mass and
@@ -44,6 +52,10 @@ from . import fluids as _fluids
 __all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError"]
 
 ANGLE_LIMIT = 1.0e3  # rad: beyond it, rounding of the angle changes the machine
+# m: smallest non-zero eccentricity.  Either one can be the reference length that divides the
+# whirl (W_r/e); a subnormal one would make that ratio infinite.  1e-12 m is far below any
+# balancing tolerance (the shipped scenes have 1e-5 to 1e-3 m).
+MIN_ECCENTRICITY = 1.0e-12
 
 
 def reference_length(rotor_eccentricity, race_eccentricity, capacity, total_mass):
@@ -75,7 +87,7 @@ class Scene:
     rotor_eccentricity: float = declare(unit="m", ge=0.0, le=1.0, yaml="rotor.eccentricity",
                                         doc="offset of the rotor's mass centre (primary "
                                             "imbalance m0 e0 = rotor_mass * eccentricity)")
-    rotor_polar_inertia: float = declare(unit="kg m^2", gt=0.0, le=1e5,
+    rotor_polar_inertia: float = declare(unit="kg m^2", ge=1e-12, le=1e5,
                                          yaml="rotor.polar_inertia",
                                          doc="polar inertia of the spinning part (with a motor)")
     support_stiffness_x: float = declare(unit="N/m", ge=1e-3, le=1e12,
@@ -98,15 +110,15 @@ class Scene:
                                            per_ball=True,
                                            doc="race drag per relative orbit speed (Spannan's "
                                                "torque coefficient = ball_drag R^2)")
-    drive_torque_limit: float = declare(unit="N m", gt=0.0, le=1e6, yaml="drive.torque_limit",
+    drive_torque_limit: float = declare(unit="N m", ge=1e-9, le=1e6, yaml="drive.torque_limit",
                                         doc="motor torque limit")
-    drive_max_acceleration: float = declare(unit="rad/s^2", gt=0.0, le=1e6,
+    drive_max_acceleration: float = declare(unit="rad/s^2", ge=1e-3, le=1e6,
                                             yaml="drive.max_acceleration",
                                             doc="largest commanded rotor acceleration")
-    drive_operating_speed: float = declare(unit="rad/s", gt=0.0, le=1e5,
+    drive_operating_speed: float = declare(unit="rad/s", ge=1e-3, le=1e5,
                                            yaml="drive.operating_speed",
                                            doc="target operating speed")
-    housing_clearance: float = declare(unit="m", gt=0.0, le=10.0, yaml="housing.clearance",
+    housing_clearance: float = declare(unit="m", ge=1e-7, le=10.0, yaml="housing.clearance",
                                        doc="largest whirl radius the housing allows")
     bearing_drag: float = declare(0.0, unit="N m s", ge=0.0, le=1e6, yaml="rotor.bearing_drag",
                                   doc="viscous drag torque on the rotor spin")
@@ -310,6 +322,18 @@ def _validate(s: Scene) -> None:
         if r >= s.race_radius:
             raise SceneError(f"scene {s.name!r}: field 'ball_radius' must be < race_radius = "
                              f"{s.race_radius:g} m (got {r:g} m)")
+    for name in ("rotor_eccentricity", "race_eccentricity"):
+        value = getattr(s, name)
+        if 0.0 < value < MIN_ECCENTRICITY:
+            raise SceneError(f"scene {s.name!r}: field {name!r} must be 0 or >= "
+                             f"{MIN_ECCENTRICITY:g} m (got {value:g} m): it may set the "
+                             f"reference length that divides the whirl")
+    for r, beta in zip(s.ball_radius, s.ball_rolling_resistance):
+        if beta > r:
+            # the normal force acts inside the contact patch, whose size is below the radius
+            raise SceneError(f"scene {s.name!r}: field 'ball_rolling_resistance' must be <= "
+                             f"the ball radius {r:g} m (the lever arm of the race normal "
+                             f"force lies inside the ball; got {beta:g} m)")
     if s.race_eccentricity >= s.race_radius:
         raise SceneError(f"scene {s.name!r}: field 'race_eccentricity' must be < race_radius = "
                          f"{s.race_radius:g} m (got {s.race_eccentricity:g} m)")
@@ -366,7 +390,11 @@ def _validate_extended(s: Scene) -> None:
 
 
 def _as_ball_tuple(scene_name: str, name: str, value: Any, count: int) -> tuple[float, ...]:
-    vals = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    # a 0-d array is one value (list() of it raises TypeError); anything else that is not a
+    # list is one value too, which check() then accepts or refuses naming the field
+    is_list = isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray)
+                                                   and value.ndim > 0)
+    vals = list(value) if is_list else [value]
     if len(vals) == 1:
         vals = vals * count
     if len(vals) != count:
@@ -377,7 +405,7 @@ def _as_ball_tuple(scene_name: str, name: str, value: Any, count: int) -> tuple[
 
 def _build(data: Mapping[str, Any], scene_name: str) -> Scene:
     valid = set(_SPECS)
-    unknown = sorted(set(data) - valid)
+    unknown = sorted(set(data) - valid, key=str)  # a YAML key may be a number
     if unknown:
         raise SceneError(f"scene {scene_name!r}: unknown field(s) {unknown}; allowed: "
                          f"{sorted(valid)}")
@@ -412,8 +440,17 @@ def _apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], scene_n
         for name, spec in _SPECS.items():
             v = data.get(name)
             if spec.per_ball and name not in overrides and isinstance(v, (list, tuple)) \
-                    and len(set(v)) == 1:
+                    and _uniform(v):
                 data[name] = v[0]
+
+
+def _uniform(values: list | tuple) -> bool:
+    """True if every entry is the same plain number (entries of any other kind, which may not
+    even compare, are left for the field check to refuse)."""
+    if not values or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                             for v in values):
+        return False
+    return all(v == values[0] for v in values)
 
 
 def _flatten_yaml(raw: Mapping[str, Any], scene_name: str) -> dict[str, Any]:
@@ -425,6 +462,10 @@ def _flatten_yaml(raw: Mapping[str, Any], scene_name: str) -> dict[str, Any]:
                 raise SceneError(f"scene {scene_name!r}: section {key!r} must be a mapping")
             for sub, v in value.items():
                 path = f"{key}.{sub}"
+                if not isinstance(sub, str):
+                    raise SceneError(f"scene {scene_name!r}: key {sub!r} in section {key!r} "
+                                     f"must be a field name; allowed: "
+                                     f"{sorted(p for p in _BY_PATH if p.startswith(key + '.'))}")
                 shortcut = f"{key}_{sub}"
                 if shortcut in _SHORTCUTS:
                     for target in _SHORTCUTS[shortcut]:
