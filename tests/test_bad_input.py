@@ -279,6 +279,28 @@ def test_values_the_physics_cannot_use_are_refused_by_the_scene(overrides, field
         load_scene("yoshida_odd", **overrides)
 
 
+@pytest.mark.parametrize("overrides, field", [
+    ({"rotor_eccentricity": 5e-324}, "rotor_eccentricity"),  # W_r/e was inf
+    ({"race_eccentricity": 1e-20}, "race_eccentricity"),
+    ({"ball_rolling_resistance": 2e-3}, "ball_rolling_resistance"),  # lever arm > radius
+    ({"drive_max_acceleration": 5e-324}, "drive_max_acceleration"),  # run-up time inf
+    ({"drive_operating_speed": 1e-300}, "drive_operating_speed"),
+    ({"rotor_polar_inertia": 1e-300}, "rotor_polar_inertia"),
+    ({"housing_clearance": 5e-324}, "housing_clearance"),
+    ({"drive_torque_limit": 5e-324}, "drive_torque_limit"),
+])
+def test_subnormal_and_unphysical_values_are_refused(overrides, field):
+    with pytest.raises(SceneError, match=field):
+        load_scene("yoshida_odd", **overrides)
+
+
+def test_the_smallest_accepted_eccentricity_gives_a_finite_whirl_ratio():
+    scene = load_scene("yoshida_odd", rotor_eccentricity=1e-12)
+    tr = simulate(scene, RAMP, 0.05, output_dt=0.01)
+    assert np.all(np.isfinite(tr.whirl_ratio))
+    assert load_scene("yoshida_odd", rotor_eccentricity=0.0).rotor_eccentricity == 0.0
+
+
 @pytest.mark.parametrize("make, field", [
     (lambda: SpeedProfile(segments=((1.0, 40.0),), initial_speed=-5.0), "initial_speed"),
     (lambda: MotorDrive(initial_speed=-5.0), "initial_speed"),

@@ -29,3 +29,11 @@ def test_speed_benchmark_parts_measure_what_they_name():
     cold = env_speed.cold_start(with_empty_cache=False)
     assert set(cold) == {"python", "import", "help", "first_step_cached"}
     assert cold["import"] >= cold["python"] > 0
+
+
+def test_energy_drift_runs_every_integrator():
+    from abb_gym.benchmarks.accuracy import energy_drift
+    rows = energy_drift(t_end=1.0, progress=False)
+    assert {r["method"] for r in rows} >= {"rk4", "etdrk4", "ros2", "dopri5", "DOP853", "Radau"}
+    assert all(np.isfinite(r["energy_drift_rel"]) and "max_steps" not in r["setting"]
+               for r in rows)

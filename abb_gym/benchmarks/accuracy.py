@@ -107,12 +107,15 @@ def energy_drift(t_end: float = 60.0, progress: bool = True) -> list[dict]:
     kw = dict(ball_speeds0=[3.0, -2.0], x0=(1e-3, 0.0), output_dt=0.1)
     runs = [("rk4", {"dt": 2e-3}), ("rk4", {"dt": 5e-4}), ("etdrk4", {"dt": 2e-3}),
             ("ros2", {"dt": 5e-4}), ("dopri5", {"rtol": 1e-6}), ("dopri5", {"rtol": 1e-9}),
-            ("DOP853", {"rtol": 1e-10}), ("Radau", {"rtol": 1e-8})]
+            ("DOP853", {"rtol": 1e-10}), ("Radau", {"rtol": 1e-8, "max_steps": 200_000})]
     rows = []
     for method, opts in tqdm(runs, desc="energy drift", disable=not progress):
         tr = simulate(scene, drive, t_end, method=method, energy_tolerance=np.inf, **kw, **opts)
         e = np.array([mdl.total_energy(s, p, b) for s in tr.states])
-        rows.append({"method": method, "setting": ", ".join(f"{k}={v:.3g}" for k, v in opts.items()),
+        # Radau at rtol 1e-8 over 60 s needs about 1.8e6 right-hand sides (some 100 s), beyond
+        # simulate's default work bound: the benchmark raises the bound for that run
+        setting = ", ".join(f"{k}={v:.3g}" for k, v in opts.items() if k != "max_steps")
+        rows.append({"method": method, "setting": setting,
                      "t_end_s": t_end, "energy_drift_rel": float((e[-1] - e[0]) / e[0]),
                      "max_abs_drift_rel": float(np.abs(e - e[0]).max() / e[0]),
                      "wall_s": tr.wall_time})
