@@ -2,8 +2,8 @@
 
 numba compiles every kernel on its first call (the general kernels of ``simulate`` and the
 environments take 20-50 s each, a kernel specialised on a scene as long) and keeps the result
-in its on-disk cache next to the sources (``__pycache__``), keyed by the content of the source
-file and by the CPU.  :func:`build` makes those calls once, in one go and with a progress
+in its on-disk cache, ``abb_gym/_kernels`` (:mod:`abb_gym._jit_cache`), keyed by the content
+of the compiled modules and by the CPU.  :func:`build` makes those calls once, in one go and with a progress
 bar, so that the caches hold:
 
 * the general kernels: ``simulate`` with every compiled method, the single environment, the
@@ -16,7 +16,8 @@ The wheel ships these caches (``make wheel`` runs :func:`build` first), so a fre
 a machine of the same CPU type starts without compiling; on another CPU, or for another
 scene's vectorised kernel, numba compiles on first use and says so on stderr while it runs
 (:func:`abb_gym.physics.specialise.compile_notice`).  A site-packages folder that is not
-writable keeps the shipped caches but stores new ones in numba's per-user cache.
+writable cannot serve its caches either (numba needs its cache folder writable): numba's
+per-user cache is used, and the kernels compile there once.
 """
 from __future__ import annotations
 

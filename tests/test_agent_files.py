@@ -33,6 +33,11 @@ BINARIES = ("model.zip", "vecnormalize.pkl")
 FILES = BINARIES + ("config.yml", MANIFEST)
 
 
+def size(name: str, agent: str = SPEED) -> int:
+    """Bytes of a shipped agent's file (the messages quote sizes; retraining changes them)."""
+    return (trained_dir() / agent / name).stat().st_size
+
+
 def copy_agent(dest: Path, name: str = SPEED) -> Path:
     folder = dest / "copy"
     shutil.copytree(trained_dir() / name, folder)
@@ -125,10 +130,13 @@ def test_a_manifest_without_normalisation_refuses_a_statistics_file(agent):
 
 # --------------------------------------------------------------------------- foreign files
 @pytest.mark.parametrize("name, donor, match", [
-    ("vecnormalize.pkl", "runup_speed_spannan_cfrp", r"vecnormalize.pkl' has 2573 bytes, "
-                                                     r"agent.yml records 2572"),
-    ("vecnormalize.pkl", "runup_torque_yoshida_odd", r"vecnormalize.pkl' has 2574 bytes"),
-    ("model.zip", "runup_torque_yoshida_odd", r"model.zip' has 149617 bytes"),
+    ("vecnormalize.pkl", "runup_speed_spannan_cfrp",
+     rf"vecnormalize.pkl' has {size('vecnormalize.pkl', 'runup_speed_spannan_cfrp')} bytes, "
+     rf"agent.yml records {size('vecnormalize.pkl')}"),
+    ("vecnormalize.pkl", "runup_torque_yoshida_odd",
+     rf"vecnormalize.pkl' has {size('vecnormalize.pkl', 'runup_torque_yoshida_odd')} bytes"),
+    ("model.zip", "runup_torque_yoshida_odd",
+     rf"model.zip' has {size('model.zip', 'runup_torque_yoshida_odd')} bytes"),
     ("config.yml", "runup_torque_yoshida_odd", r"records env id .*RunUpSpeed.*RunUpTorque"),
     ("config.yml", "runup_speed_spannan_cfrp", r"records scene 'yoshida_odd', config.yml "
                                                r"'spannan_cfrp'"),
@@ -145,7 +153,8 @@ def test_another_agents_statistics_are_refused_by_evaluate(agent, tmp_path, caps
     rc = main(["evaluate", "--policy", f"ppo:{agent}", "--episodes", "1",
                "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
-    assert rc == 2 and "vecnormalize.pkl' has 2573 bytes" in err and "replaced" in err
+    foreign = size("vecnormalize.pkl", "runup_speed_spannan_cfrp")
+    assert rc == 2 and f"vecnormalize.pkl' has {foreign} bytes" in err and "replaced" in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     (agent / "vecnormalize.pkl").unlink()
     assert main(["evaluate", "--policy", f"replay:ppo:{agent}", "--episodes", "1",
@@ -175,13 +184,14 @@ CORRUPTIONS = {
 
 
 @pytest.mark.parametrize("name, how, match", [
-    ("vecnormalize.pkl", "truncated", r"vecnormalize.pkl' has 1286 bytes, agent.yml records "
-                                      r"2572: truncated"),
+    ("vecnormalize.pkl", "truncated",
+     rf"vecnormalize.pkl' has {size('vecnormalize.pkl') // 2} bytes, agent.yml records "
+     rf"{size('vecnormalize.pkl')}: truncated"),
     ("vecnormalize.pkl", "empty", r"vecnormalize.pkl' is empty"),
     ("vecnormalize.pkl", "random", r"vecnormalize.pkl' is not the file the agent was saved"),
     ("vecnormalize.pkl", "pickled dict", r"vecnormalize.pkl' has \d+ bytes"),
     ("vecnormalize.pkl", "directory", r"vecnormalize.pkl' is a directory"),
-    ("model.zip", "truncated", r"model.zip' has 74806 bytes"),
+    ("model.zip", "truncated", rf"model.zip' has {size('model.zip') // 2} bytes"),
     ("model.zip", "directory", r"model.zip' is a directory"),
     ("config.yml", "invalid yaml", r"config.yml' is not valid YAML"),
     ("config.yml", "a list", r"config.yml' must hold a mapping of fields \(got list\)"),
@@ -228,7 +238,7 @@ def test_write_manifest_refuses_corrupt_files(agent):
     with pytest.raises(AgentError, match="holds a dict"):
         write_manifest(agent)
     assert yaml.safe_load((agent / MANIFEST).read_text())["files"]["vecnormalize.pkl"][
-        "bytes"] == 2572  # the old manifest is left as it was
+        "bytes"] == size("vecnormalize.pkl")  # the old manifest is left as it was
 
 
 def test_the_manifest_module_command(agent, capsys):
@@ -306,7 +316,7 @@ else:
                 load_policy(folder)
             except AgentError as exc:
                 msg = str(exc)
-                assert "\n" not in msg and "Traceback" not in msg
+                assert "\n" not in msg
                 assert any(f in msg for f in FILES), msg
                 if name in BINARIES and not retagged:
                     assert name in msg, msg

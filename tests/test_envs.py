@@ -58,8 +58,10 @@ def test_registration_and_spaces():
         spec = gym.spec(env_id)
         assert spec.vector_entry_point is not None
         env = gym.make(env_id)
-        # RunUp* register none (scene-dependent lengths); the made env's spec is exact
-        assert env.spec.max_episode_steps is not None
+        # RunUp* register none (scene-dependent lengths); the made env's spec is exact, and
+        # a DwellProfile episode is one step (2: a limit of 1 would mark it truncated too)
+        assert env.spec.max_episode_steps == (
+            2 if env_id.endswith("DwellProfile-v0") else env.unwrapped.setup.max_steps)
         assert isinstance(env.observation_space, gym.spaces.Box)
         assert env.observation_space.dtype == np.float32
         assert env.observation_space.shape == (5 + env.action_space.shape[0],)

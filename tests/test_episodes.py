@@ -23,6 +23,21 @@ def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():
     batched = ([episodes._uniform(r, u[k]) for k, r in enumerate(ranges)]
                + list(episodes._uniform((-3.0, 3.0), u[3:])))
     assert np.array_equal(one_by_one, batched)
+    # and draw() itself: the train preset's values in its documented order, as rng.uniform
+    # would give them one by one
+    setup = EnvSetup("speed", "yoshida_odd", "train")
+    rz = setup.config.randomize
+    a = np.random.default_rng(5)
+    ratio = a.uniform(*rz.imbalance_ratio)
+    phase = a.uniform(*rz.imbalance_phase)
+    angles = a.uniform(*rz.ball_angles, size=setup.scene.ball_count)
+    drag = a.uniform(*rz.ball_drag_scale)
+    roll = a.uniform(*rz.rolling_resistance_scale)
+    got = episodes.draw(setup, np.random.default_rng(5), None)
+    assert got[0] == ratio * setup.scene.balancing_capacity
+    assert got[1] == episodes.reduce_angle(phase)
+    assert np.array_equal(got[2], episodes.reduce_angle(angles))
+    assert (got[3], got[4]) == (drag, roll)
 
 
 @pytest.mark.parametrize("scene", ["yoshida_odd", "washer", "yoshida_odd5"])

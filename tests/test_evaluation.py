@@ -218,7 +218,7 @@ def test_tuner_survives_a_flat_objective(monkeypatch):
         return [{"family": family, "params": c, "return": -5.0, "run_up_time": 1.0,
                  "residual_vibration": 1.0, "peak_whirl": 1.0, "at_speed": 0.0,
                  "balanced": 0.0} for c in candidates]
-    monkeypatch.setattr(tuner, "evaluate_candidates", flat)
+    monkeypatch.setattr(tuner, "_evaluate_candidates", flat)
     # seed 0 and budget 20: the CMA-ES run (cma seed 1) that failed on spannan_cfrp's ramp
     result = tuner.tune("yoshida_odd", families=("ramp", "knots"), budget=20, episodes=1,
                         seed=0, progress=False)

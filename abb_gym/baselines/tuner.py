@@ -126,6 +126,14 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
     load_scene(scene_name)  # validate early, with the scene's own error message
     _check_counts(episodes=episodes)
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
+    return _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
+                                executor, per_task, env_id, progress, env_kwargs)
+
+
+def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset, executor,
+                         per_task=256, env_id=ENV_ID, progress=False, env_kwargs=None):
+    """:func:`evaluate_candidates` with the scene, counts and environment already checked
+    (the tuner and the sweep check them once, not once per CMA-ES generation)."""
     for c in candidates:
         build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // episodes)
@@ -159,8 +167,8 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
     import cma
 
     space = profiles.search_space(family_class(family))
-    default = evaluate_candidates(scene_name, family, [{}], episodes, seed, preset, executor,
-                                  env_id=env_id, env_kwargs=env_kwargs)[0]
+    default = _evaluate_candidates(scene_name, family, [{}], episodes, seed, preset,
+                                   executor, env_id=env_id, env_kwargs=env_kwargs)[0]
     bar.update(1)
     best = default
     evaluations = 1
@@ -176,8 +184,8 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
         while not es.stop():
             xs = es.ask()
             cands = [params_from_unit(family, x, scales) for x in xs]
-            rows = evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
-                                       executor, env_id=env_id, env_kwargs=env_kwargs)
+            rows = _evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
+                                        executor, env_id=env_id, env_kwargs=env_kwargs)
             es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9 for r in rows])
             evaluations += len(rows)
             bar.update(len(rows))
@@ -206,8 +214,11 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
             popsize, (int, np.integer)) or popsize < 2):
         # CMA-ES ranks at least two candidates per generation
         raise ValueError(f"popsize must be an integer >= 2 (got {popsize!r})")
-    # before any candidate runs: every input a task will use (a bad one is one error)
+    # before any candidate runs: every input a task will use (a bad one is one error), and
+    # the file the result goes to
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
+    if out is not None:
+        check_tuned_path(tuned_path(out, scene_name), force)
     scales = search_scales(scene_name, env_id, preset)
     result: dict[str, Any] = {
         "scene": scene_name, "env": env_id, "preset": preset,
@@ -239,14 +250,17 @@ def _rounded(params: dict[str, Any]) -> dict[str, Any]:
                 (round(v, 6) if isinstance(v, float) else v)) for k, v in params.items()}
 
 
-def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -> Path:
-    """Write a tuning result to ``path`` (a ``.yaml`` file, or a folder that gets
-    ``<scene>.yaml``).  An existing file is replaced only with ``force``; the installed
-    package's shipped files never are."""
+def tuned_path(out: str | Path, scene_name: str) -> Path:
+    """The file a tuning result for ``scene_name`` goes to: ``out`` if it is a ``.yaml``
+    file, else ``out/<scene>.yaml``."""
+    out = Path(out)
+    return out if out.suffix in (".yaml", ".yml") else out / f"{scene_name}.yaml"
+
+
+def check_tuned_path(path: Path, force: bool = False) -> None:
+    """Raise ValueError if a tuning result may not be written to ``path``: an existing file
+    without ``force``, a shipped file of the installed package, a parent that is a file."""
     from .. import resources
-    path = Path(path)
-    if path.suffix not in (".yaml", ".yml"):  # a folder
-        path = path / f"{result['scene']}.yaml"
     if resources.is_shipped(path) and "site-packages" in path.resolve().parts:
         raise ValueError(f"{str(path)!r} belongs to the installed abb-gym package; write the "
                          f"tuned parameters to your own folder and add it with --configs or "
@@ -255,6 +269,14 @@ def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -
         raise ValueError(f"{str(path)!r} exists; pass --force to replace it")
     if path.parent.exists() and not path.parent.is_dir():
         raise ValueError(f"cannot write {str(path)!r}: {str(path.parent)!r} is a file")
+
+
+def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -> Path:
+    """Write a tuning result to ``path`` (a ``.yaml`` file, or a folder that gets
+    ``<scene>.yaml``).  An existing file is replaced only with ``force``; the installed
+    package's shipped files never are."""
+    path = tuned_path(path, result["scene"])
+    check_tuned_path(path, force)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = ("# Tuned baseline parameters (abb-gym tune-baselines); SI units, rad/s, s,\n"
               "# rad/s^2.  Tuned on the training preset; evaluate on the test preset.\n")
@@ -281,6 +303,6 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
             continue
         cube = (np.stack([rng.permutation(n) for _ in range(d)], axis=1) + rng.random((n, d))) / n
         cands = [params_from_unit(fam, x, scales) for x in cube]
-        rows += evaluate_candidates(scene_name, fam, cands, episodes, seed, preset, executor,
-                                    env_id=env_id)
+        rows += _evaluate_candidates(scene_name, fam, cands, episodes, seed, preset, executor,
+                                     env_id=env_id)
     return rows

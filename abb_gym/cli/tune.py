@@ -11,7 +11,6 @@ An existing file is replaced only with ``--force``.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..execution.cli import add_executor_arguments
 from .evaluate import _executor
@@ -51,7 +50,6 @@ def register(sub) -> None:
 def run(args) -> int:
     import yaml
     from ..baselines.tuner import tune
-    from ..envs.config import load_preset
     from ..physics.scene import load_scene
     for name in ("budget", "episodes"):
         if getattr(args, name) < 1:
@@ -60,22 +58,18 @@ def run(args) -> int:
         raise ValueError(f"--popsize must be >= 2 (got {args.popsize})")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0 (got {args.seed})")
+    from ..baselines.tuner import check_tuned_path, tuned_path
     from ..configuration import parse_assignments
     from ..evaluation.evaluate import check_inputs
     load_scene(args.scene)
     env_kwargs = parse_assignments(args.env_kwargs, "--env-kwargs")
-    load_preset(args.preset, **{k: v for k, v in env_kwargs.items()
-                                if k not in ("observe_balls", "record_history")})
-    # the environment every task makes, once here (keywords, stiffness of the preset)
+    # the environment every task makes, once here (preset, keywords, stiffness)
     check_inputs(args.env, args.scene, args.preset, args.seed, **env_kwargs)
     out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
-    if out is not None and Path(out).exists() and not Path(out).is_dir() and not args.force:
-        raise ValueError(f"{out!r} exists; pass --force to replace it")
     if out is not None:
         from .outputs import output_file
-        # the file tune() writes (a folder --out gets <scene>.yaml, as write_tuned names it)
-        target = (Path(out) if Path(out).suffix in (".yaml", ".yml")
-                  else Path(out) / f"{args.scene}.yaml")
+        target = tuned_path(out, args.scene)
+        check_tuned_path(target, args.force)
         output_file(target, "--out")
     result = tune(args.scene, tuple(args.family or FAMILIES), args.budget, args.episodes,
                   args.seed, args.preset, _executor(args), out=out, force=args.force,

@@ -127,9 +127,9 @@ class ActionModel:
             d[..., dl.D_TLIM] = setup.torque_limit
 
     def before_step(self, setup: Any, bufs: Any, i: int, action: np.ndarray,
-                    ep: Any) -> dict[str, Any] | None:
-        """Python-side work before the compiled step of row ``i`` (clipped ``action``);
-        returns extra info for that row, or None."""
+                    imbalance_phase: float) -> dict[str, Any] | None:
+        """Python-side work before the compiled step of row ``i`` (clipped ``action``, the
+        episode's imbalance phase [rad]); returns extra info for that row, or None."""
         return None
 
     @property
@@ -185,8 +185,8 @@ class DwellAction(ActionModel):
                               f"({dw.speed_range[0]:g} x {wc:.4g} rad/s > "
                               f"{setup.operating_speed:.4g} rad/s)")
 
-    def before_step(self, setup, bufs, i, action, ep):
-        profile, params = dwell_profile(setup, action, ep.imbalance_phase)
+    def before_step(self, setup, bufs, i, action, imbalance_phase):
+        profile, params = dwell_profile(setup, action, imbalance_phase)
         _, rows = profile.segment_table(setup.episode_length + setup.control_interval)
         d = bufs.d[i]
         d[:] = 0.0

@@ -158,9 +158,8 @@ COMMON_DOC = textwrap.dedent(r"""
     ``scene`` (name, path or Scene; default "yoshida_odd"), ``preset`` (name in
     ``configs/envs``, path, dict or EnvConfig; default "train"), ``observe_balls`` (False),
     ``render_mode`` (None, "rgb_array", "human"), ``max_episode_steps`` (backstop, None),
-``record_history`` (False: keep a per-interval history, :meth:`history`), ``info_level``
-("lean" or "full", above), and any
-    preset field as a keyword (``control_interval=0.02``, ``reward={"time": 2.0}``, ...).
+    ``record_history`` (False: keep a per-interval history, :meth:`history`), ``info_level``
+    ("lean" or "full", above), and any preset field as a keyword (``control_interval=0.02``, ``reward={"time": 2.0}``, ...).
 
     ## Bad input
 
@@ -228,7 +227,6 @@ class BalancerEnv(SetupAccess, gym.Env):
         nq = 3 + self.setup.scene.ball_count
         self._nq = nq
         self._dt = self.setup.control_interval
-        self._ref_len = self.setup.scene.reference_length
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
@@ -289,7 +287,6 @@ class BalancerEnv(SetupAccess, gym.Env):
         episodes.commit(self._bufs, self._table, pending)
         self._bufs.observe(np.zeros(1, dtype=np.int64))
         ep = self._episode = self._table.episode(0)
-        self._ref_len = float(self._table.reference_length[0])
         self._done = False
         self.last_profile = None
         info = self._info(level="full")
@@ -313,7 +310,8 @@ class BalancerEnv(SetupAccess, gym.Env):
             if np.any(clipped != a):
                 self._warn_clipped(action)
             a = clipped
-            extra = self.setup.actions.before_step(self.setup, self._bufs, 0, a, self._episode)
+            extra = self.setup.actions.before_step(self.setup, self._bufs, 0, a,
+                                                   float(self._table.imbalance_phase[0]))
             if extra:
                 self.last_profile = extra.pop("profile", None)
         self._act_row[:] = a
@@ -350,8 +348,9 @@ class BalancerEnv(SetupAccess, gym.Env):
             self._warned_clip = True
 
     def _info(self, level: str | None = None, done: bool = False) -> dict[str, Any]:
-        return step_info(self.setup, self._out_row, self._st_row, self._s_row, self._ref_len,
-                         level or self.info_level, done)
+        # the episode's reference length lives in the table (it survives pickling with it)
+        return step_info(self.setup, self._out_row, self._st_row, self._s_row,
+                         float(self._table.reference_length[0]), level or self.info_level, done)
 
     def render(self):
         if self.render_mode is None:

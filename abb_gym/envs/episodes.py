@@ -11,11 +11,11 @@ given as reset options.
   the initial state, the drive rows and the bookkeeping of the compiled step, with numpy over
   the rows plus one compiled call for the stiff rates that set each episode's integration
   step; it changes nothing, so a reset it rejects leaves every row as it was.
-  :func:`commit` then writes it (:func:`write` does both).  The single environment
-  resets through the same functions with one row, so a single environment and a sub-environment
-  of the vector environment stay alike bit for bit.  It reproduces exactly what packing the
-  episode's Scene would give (``tests/test_envs_vector.py`` checks it against
-  :meth:`Episode.scene`).
+  :func:`commit` then writes it (``EnvSetup.reset_rows`` does both).  The single
+  environment resets through the same functions with one row, so a single environment and a
+  sub-environment of the vector environment stay alike bit for bit.  It reproduces exactly
+  what packing the episode's Scene would give (``tests/test_episodes.py`` checks the packed
+  parameters, the reference length and the integration step against :meth:`Episode.scene`).
 * :class:`EpisodeTable` keeps the values of every row; :class:`Episode` is one row's view,
   whose Scene is built only when asked for (building and validating a Scene costs ~0.3 ms, the
   reset of a row without it a few microseconds).
@@ -55,7 +55,7 @@ from .layout import (N_ST, S_ACC, S_AOP, S_AREF, S_DTMAX, S_NSEG, S_PEN_RATE, S_
                      S_UBEST, S_USCALE, S_XS, S_YS)
 
 __all__ = ["RESET_OPTIONS", "MAX_STIFFNESS", "Episode", "EpisodeTable", "Pending", "draw",
-           "prepare", "commit", "write", "check_preset_stiffness", "reduce_angle",
+           "prepare", "commit", "check_preset_stiffness", "reduce_angle",
            "episode_scene", "packed_rows"]
 
 RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
@@ -339,14 +339,20 @@ def _stiff_message(setup: Any, drag: float, roll: float, step: float, needed: fl
             f"(integrates the stiff drag exactly at the ordinary step) or smaller scales")
 
 
-def _rk4_steps(setup: Any, p: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
-    """(the RK4 step of each packed episode [s], the step its rotation alone needs [s])."""
+def _rk4_steps(setup: Any, p: np.ndarray, b: np.ndarray, drag, roll, where: str,
+               error: type[ValueError] = ValueError) -> np.ndarray:
+    """The RK4 step of each packed episode [s] (drag and rolling-resistance scales ``drag``,
+    ``roll``); raises ``error`` if the stiffest needs a step more than :data:`MAX_STIFFNESS`
+    times shorter than its rotation alone does (module docstring)."""
     sc = setup.scene
     rate = stiff_rates(p, b, setup.max_speed)
     step = np.broadcast_to(np.asarray(default_step(sc, setup.max_speed, "rk4", rate=rate),
                                       float), (p.shape[0],))
     needed = float(default_step(sc, setup.max_speed, "rk4", rate=0.0))
-    return step, needed
+    k = int(np.argmin(step))
+    if needed > MAX_STIFFNESS * step[k]:
+        raise error(_stiff_message(setup, drag[k], roll[k], step[k], needed, where))
+    return step
 
 
 def check_preset_stiffness(setup: Any) -> None:
@@ -365,12 +371,8 @@ def check_preset_stiffness(setup: Any) -> None:
     sc = setup.scene
     imbalance = np.full(len(corners), sc.imbalance)
     p, b = packed_rows(sc, imbalance, corners[:, 0], corners[:, 1])
-    step, needed = _rk4_steps(setup, p, b)
-    k = int(np.argmin(step))
-    if needed > MAX_STIFFNESS * step[k]:
-        raise PresetError(_stiff_message(setup, corners[k, 0], corners[k, 1], step[k], needed,
-                                         f"environment preset {cfg.name!r} (its randomize "
-                                         f"ranges allow it)"))
+    _rk4_steps(setup, p, b, corners[:, 0], corners[:, 1],
+               f"environment preset {cfg.name!r} (its randomize ranges allow it)", PresetError)
 
 
 def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, drag, roll
@@ -391,11 +393,7 @@ def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, dra
     step = setup.config.integration_step
     if step is None:
         if setup.config.integrator == "rk4":
-            step, needed = _rk4_steps(setup, p, b)
-            k = int(np.argmin(step))
-            if needed > MAX_STIFFNESS * step[k]:
-                raise ValueError(_stiff_message(setup, drag[k], roll[k], step[k], needed,
-                                                "reset"))
+            step = _rk4_steps(setup, p, b, drag, roll, "reset")
         else:
             step = default_step(sc, setup.max_speed, setup.config.integrator,
                                 rate=np.zeros(len(rows)))
@@ -454,10 +452,3 @@ def commit(bufs: Any, table: EpisodeTable, pending: Pending) -> None:
     table.rolling_resistance_scale[rows] = pending.roll
     table.integration_step[rows] = pending.step
     table.reference_length[rows] = pending.reference_length
-
-
-def write(setup: Any, bufs: Any, table: EpisodeTable, rows, imbalance, phase, angles, drag,
-          roll) -> None:
-    """Reset ``rows`` of ``bufs`` to the start of their episodes: :func:`prepare`, then
-    :func:`commit`."""
-    commit(bufs, table, prepare(setup, table, rows, imbalance, phase, angles, drag, roll))

@@ -7,7 +7,7 @@ are documented in :mod:`abb_gym.envs.base` (Info).
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -67,8 +67,7 @@ def _state_column(name: str, nq: int):
 
 def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
     """The lean keys: ``reward_terms`` and, on a failure, ``failure``."""
-    single = out.ndim == 1
-    if single:
+    if out.ndim == 1:
         info: dict[str, Any] = {"reward_terms": {name: float(out[col]) for name, col
                                                  in zip(TERM_NAMES, TERM_COLUMNS)}}
         code = out[O_FCODE]
@@ -94,16 +93,14 @@ def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len,
     ``level`` "full": every key; "lean": ``reward_terms`` (and ``failure``) only, plus every
     key when an episode ends (``done``: bool, or a bool array over rows), so that the final
     info of an episode always carries its run-up metrics."""
+    info = _terms_and_failure(setup, out, st, s)
     if level == "lean" and not np.any(done):
-        return _terms_and_failure(setup, out, st, s)
+        return info
     nq = 3 + setup.scene.ball_count
     dt = setup.control_interval
     single = out.ndim == 1
     # one row: Python lists (much cheaper to read than numpy scalars); all rows: columns
     bufs = {"out": out.tolist(), "st": st.tolist()} if single else {"out": out.T, "st": st.T}
-    info: dict[str, Any] = {"reward_terms": {name: (bufs["out"][col] if single
-                                                    else out[:, col].copy())
-                                             for name, col in zip(TERM_NAMES, TERM_COLUMNS)}}
     for key, (buf, col, conv) in STEP_KEYS.items():
         if buf == "s":
             c = _state_column(col, nq)
@@ -136,15 +133,6 @@ def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len,
         with np.errstate(invalid="ignore", divide="ignore"):
             info["residual_vibration"] = np.where(res_t > 0.0, res_int / res_t, np.inf)
         info["peak_vibration"] = np.where(np.isnan(peak_entry), peak, peak_entry)
-    code = bufs["out"][O_FCODE]
-    if single:
-        if code:
-            info["failure"] = setup.failure_message(int(code), out, st, s)
-    elif code.any():
-        msgs = np.full(code.shape[0], None, dtype=object)
-        for i in np.flatnonzero(code):
-            msgs[i] = setup.failure_message(int(code[i]), out[i], st[i], s[i])
-        info["failure"] = msgs
     return info
 
 

@@ -35,7 +35,7 @@ from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FIL
                      N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
                      T_VIB, T_VIBMAX, T_W, T_X, T_Y)
 
-__all__ = ["EnvSetup", "Buffers", "SetupAccess", "resolve_kernel", "check_seed", "draw_safely"]
+__all__ = ["EnvSetup", "Buffers", "SetupAccess", "check_seed", "draw_safely"]
 
 
 def check_seed(seed: Any, what: str = "seed") -> int | None:

@@ -283,7 +283,8 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         am = self.setup.actions
         if am.works_before_step:
             for i in np.flatnonzero(bf.active):
-                am.before_step(self.setup, bf, int(i), bf.act[i], self._table.episode(int(i)))
+                am.before_step(self.setup, bf, int(i), bf.act[i],
+                               float(self._table.imbalance_phase[i]))
         step = self._step_fn
         if step is None:
             step = self._step_fn = bf.step_function()

@@ -178,7 +178,8 @@ def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
     if not isinstance(env_id, str) or env_id not in gym.registry \
             or not env_id.startswith("abb_gym/"):
         raise ValueError(f"unknown environment {env_id!r}; use one of {env_ids()}")
-    check_seed(seed, "seed")
+    if check_seed(seed, "seed") is None:  # episode k is seed + k: no "fresh entropy" here
+        raise ValueError("seed must be an integer >= 0 (got None)")
     make_env(env_id, scene, preset, 1, **env_kwargs).close()
     spec = policy
     while spec is not None:

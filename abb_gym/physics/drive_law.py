@@ -36,8 +36,8 @@ D_WNL      rad/s       motor: no-load speed of a linear torque-speed envelope (0
 D_PLIM     W           motor: power limit (0 = none)
 =========  ==========  ===========================================================
 
-A row with ``D_WNL`` or ``D_PLIM`` set needs the envelope, which the plain kernel leaves out:
-:func:`needs_envelope` says so, and the model then takes its extended path.
+A row with ``D_WNL`` or ``D_PLIM`` set needs the envelope: ``model.spec_of`` then sets
+``SPEC_ENVELOPE``, and only kernels compiled with that bit evaluate it.
 """
 from __future__ import annotations
 
@@ -99,12 +99,6 @@ def motor_law(tau, w, command, gain, w_target0, target_accel, limit, no_load_spe
     if envelope:
         lim = available_torque(lim, w, no_load_speed, power)
     return lim if torque > lim else (-lim if torque < -lim else torque)
-
-
-@njit(cache=True, inline="always")
-def needs_envelope(d):
-    """True if row ``d`` has a torque-speed envelope (no-load speed or power limit)."""
-    return d[D_WNL] != 0.0 or d[D_PLIM] != 0.0
 
 
 @njit(cache=True)

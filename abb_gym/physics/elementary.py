@@ -39,7 +39,7 @@ from numba import njit
 for _option in ("-unroll-threshold=2000", "-vectorize-memory-check-threshold=100000"):
     _llvm.set_option("abb_gym", _option)
 
-__all__ = ["sincos", "sin", "cos", "exp_bounded", "tanh", "SINCOS_LIMIT"]
+__all__ = ["sincos", "exp_bounded", "tanh", "SINCOS_LIMIT"]
 
 SINCOS_LIMIT = 1.6e6
 
@@ -95,16 +95,6 @@ def sincos(x):
     sin_x = -sin_x if q >= 2.0 else sin_x
     cos_x = -cos_x if (q == 1.0) | (q == 2.0) else cos_x
     return sin_x, cos_x
-
-
-@njit(cache=True, inline="always")
-def sin(x):
-    return sincos(x)[0]
-
-
-@njit(cache=True, inline="always")
-def cos(x):
-    return sincos(x)[1]
 
 
 @njit(cache=True, inline="always")

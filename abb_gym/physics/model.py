@@ -377,8 +377,8 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     the results agree bit for bit.
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
-    ball; the balls' accelerations then need their terms again, which are recomputed rather
-    than stored: stores to scratch memory inside the loop would stop its vectorisation."""
+    ball; each ball's terms (generalised force, coupling columns, inverse inertia) are kept
+    in ``work`` for the second pass, which solves for the balls' accelerations."""
     L = s.shape[1]
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
@@ -575,16 +575,16 @@ def accelerations(t, s, p, b, d, qdd=None, work=None):
     ``qdd`` is given (filled in place), else the accelerations."""
     s = np.ascontiguousarray(s, dtype=float)
     ds = np.empty_like(s)
+    spec = spec_of(p, d)
     state_derivative(float(t), s, np.ascontiguousarray(p, float), np.ascontiguousarray(b, float),
-                     np.ascontiguousarray(d, float), ds, spec_of(p, d))
+                     np.ascontiguousarray(d, float), ds, spec)
     nq = s.shape[0] // 2
     if qdd is None:
         return ds[nq:].copy()
     qdd[:] = ds[nq:]
-    if d[dl.D_MODE] == dl.MODE_MOTOR:
-        envelope = bool(d[dl.D_WNL] != 0.0 or d[dl.D_PLIM] != 0.0)
+    if spec & SPEC_MOTOR:
         return dl.motor_torque(float(t), float(s[nq + 2]), np.ascontiguousarray(d, float),
-                               envelope)
+                               bool(spec & SPEC_ENVELOPE))
     return 0.0
 
 

@@ -59,10 +59,8 @@ def stiff_rates(p: np.ndarray, b: np.ndarray, max_speed: float) -> np.ndarray:
     ``b`` (R, n, N_BALL_PARAMS) (the episodes of a vector environment)."""
     d = np.zeros(dl.N_DRIVE)
     d[dl.D_W0] = max_speed
-    spec = 0
-    for row in p:
-        spec |= mdl.spec_of(row, d)
-    return _stiff_rates(np.ascontiguousarray(p, float), np.ascontiguousarray(b, float), d, spec)
+    return _stiff_rates(np.ascontiguousarray(p, float), np.ascontiguousarray(b, float), d,
+                        mdl.spec_of(p, d))
 
 
 @njit(cache=True)
@@ -518,9 +516,6 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
                          f"turns even a 1e5 rad/s rotor by 1e-4 rad, and solve_ivp fails on it")
     if not (isinstance(method, str) and method in METHODS):
         raise ValueError(f"method must be one of {METHODS} (got {method!r:.80})")
-    if kernel is not None and not isinstance(kernel, str):
-        raise ValueError(f"kernel must be None or one of 'auto', 'generic', 'specialised' "
-                         f"(got {kernel!r:.80})")
     specialised = resolve_kernel(kernel, 1) == "specialised"
     if dt is not None:
         dt = _finite("dt", dt, positive=True, unit="s")

@@ -12,7 +12,6 @@ directly afterwards: a dictionary lookup plus the usual unboxing of the argument
 """
 from __future__ import annotations
 
-import logging
 import os
 import sys
 import threading
@@ -35,6 +34,8 @@ def resolve_kernel(kernel: str | None, lanes: int) -> str:
     and effects (once per pair, 20-60 s; it vectorises across lanes and runs fastest),
     "generic" is compiled once for every scene; "auto" picks the specialised kernel from
     ``VECTORISE_FROM`` lanes per block on, where its compilation pays off."""
+    if kernel is not None and not isinstance(kernel, str):
+        raise ValueError(f"kernel must be None or one of {KERNELS} (got {kernel!r:.80})")
     kernel = kernel or os.environ.get("ABB_GYM_KERNEL") or "auto"
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r}; from "
@@ -43,7 +44,6 @@ def resolve_kernel(kernel: str | None, lanes: int) -> str:
         kernel = "specialised" if lanes >= VECTORISE_FROM else "generic"
     return kernel
 
-log = logging.getLogger(__name__)
 NOTICE_AFTER = 1.0  # [s] a compilation that takes longer than this is announced
 
 
