@@ -6,12 +6,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from abb_gym import simulate
+from abb_gym import SpeedProfile, simulate
 from abb_gym.baselines import families, profiles, tuner
 from abb_gym.cli import main
-from abb_gym.baselines.baseline_policy import make_baseline
+from abb_gym.baselines.baseline_policy import BaselinePolicy, make_baseline
 from abb_gym.envs.actions import dwell_action, dwell_profile
-from abb_gym.evaluation.evaluate import evaluate, summarise
+from abb_gym.evaluation.evaluate import evaluate, policy_env_id, summarise
 from abb_gym.evaluation.statistics import share_ci
 from abb_gym.evaluation.report import pareto_front, write_report
 
@@ -66,6 +66,43 @@ def test_dwell_action_encodes_the_profile():
     assert params["dwell_speed"] == pytest.approx(110.0)
     assert params["dwell_time"] == pytest.approx(0.4)
     assert params["dwell_acceleration"] == pytest.approx(10.0)
+
+
+def test_dwell_action_refuses_a_profile_it_does_not_encode():
+    """Only ramp - dwell - ramp at the environment's run-up acceleration is a DwellProfile
+    action; the first ramp alone matching is not enough (the round trip must give the
+    profile back)."""
+    setup = gym.make("abb_gym/DwellProfile-v0", scene="yoshida_odd",
+                     preset="nominal").unwrapped.setup
+    alpha = setup.dwell_acceleration
+    good = profiles.build("accel_dwell", setup.scene, dwell_speed=110.0, dwell_time=0.4,
+                          dwell_accel=10.0)
+    other_final_ramp = SpeedProfile(segments=good.segments[:2] + (
+        ((setup.operating_speed - good.speed(good.breakpoints[2])) / (0.5 * alpha),
+         0.5 * alpha),))
+    knots = families.build_family("knots").profile(setup.scene)
+    with pytest.raises(ValueError, match="no DwellProfile action encodes it"):
+        dwell_action(setup, other_final_ramp)
+    with pytest.raises(ValueError, match="DwellProfile action"):
+        dwell_action(setup, knots)
+    dwell_action(setup, good)
+
+
+def test_dwell_profile_evaluation_runs_inexpressible_baselines_on_runup_speed():
+    """On DwellProfile, baseline:knots and the closed-loop baselines run on RunUpSpeed on the
+    same machines (the same numbers as evaluating them there), and a PPO agent's own
+    results stay on DwellProfile."""
+    dwell = "abb_gym/DwellProfile-v0"
+    assert policy_env_id(dwell, "yoshida_odd", "test", "baseline:knots") == SPEED
+    assert policy_env_id(dwell, "yoshida_odd", "test", "replay:baseline:retry") == SPEED
+    assert policy_env_id(SPEED, "yoshida_odd", "test", "baseline:knots") == SPEED
+    on_dwell = evaluate(dwell, "yoshida_odd", "baseline:knots", episodes=3, seed=5)
+    on_speed = evaluate(SPEED, "yoshida_odd", "baseline:knots", episodes=3, seed=5)
+    assert on_dwell.env_id == SPEED
+    assert [e["return"] for e in on_dwell.episodes] == [e["return"] for e in on_speed.episodes]
+    setup = gym.make(dwell, scene="yoshida_odd", preset="test").unwrapped.setup
+    expressible = BaselinePolicy("dwell", dwell_profile(setup, [0.0, -1 / 3, 0.0])[0])
+    assert expressible.acts_on(setup)
 
 
 def test_evaluation_is_deterministic_and_independent_of_chunking():

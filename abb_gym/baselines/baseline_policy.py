@@ -107,6 +107,20 @@ class BaselinePolicy(SpeedReferencePolicy):
             return self._profiles
         return self._profiles[i]
 
+    def acts_on(self, setup: Any) -> bool:
+        """Whether the environment of ``setup`` can execute every profile: always for speed and
+        torque; on DwellProfile only ramp - dwell - ramp profiles its action encodes."""
+        if setup.kind != "dwell":
+            return True
+        profiles = ([self._profiles] if isinstance(self._profiles, SpeedProfile)
+                    else list(self._profiles))
+        try:
+            for profile in profiles:
+                dwell_action(setup, profile)
+        except ValueError:
+            return False
+        return True
+
     def reset(self, env, mask: np.ndarray) -> None:
         self._bind(env)
         n = env.num_envs
@@ -138,6 +152,12 @@ class ClosedLoopPolicy(SpeedReferencePolicy):
         self._families = families
         self.params = dict(params or {})
         self._controller = None
+
+    @staticmethod
+    def acts_on(setup: Any) -> bool:
+        """Whether the environment of ``setup`` lets the controller react: not DwellProfile,
+        whose one action is decided before the run."""
+        return setup.kind != "dwell"
 
     def reset(self, env, mask: np.ndarray) -> None:
         self._bind(env)
@@ -182,13 +202,19 @@ class _LazyBaseline:
         self.name = f"baseline:{family}"
         self.params: dict[str, Any] = {}
 
-    def reset(self, env, mask):
+    def _resolve(self, setup: Any):
         if self._inner is None:
-            setup = env.unwrapped.setup
             self._inner = make_baseline(self.family, setup.scene, setup.operating_speed)
             self.name = self._inner.name
             self.params = self._inner.params
-        self._inner.reset(env, mask)
+        return self._inner
+
+    def acts_on(self, setup: Any) -> bool:
+        """See :meth:`BaselinePolicy.acts_on` and :meth:`ClosedLoopPolicy.acts_on`."""
+        return self._resolve(setup).acts_on(setup)
+
+    def reset(self, env, mask):
+        self._resolve(env.unwrapped.setup).reset(env, mask)
 
     def act(self, obs, info):
         return self._inner.act(obs, info)

@@ -248,7 +248,23 @@ def dwell_action(setup: Any, profile: SpeedProfile) -> np.ndarray:
     a = np.array([unlerp(dw.speed_range, w_s / setup.scene.critical_speed),
                   unlerp(dw.time_range, t_c / setup.nominal_runup_time),
                   unlerp(dw.accel_range, a_c / alpha)])
-    return np.clip(a, -1.0, 1.0).astype(np.float32)
+    action = np.clip(a, -1.0, 1.0).astype(np.float32)
+    # the round trip must give the profile back: anything else (more knots, another final
+    # ramp, a dwell outside the action ranges) is not a DwellProfile action
+    encoded = dwell_profile(setup, action, profile.initial_angle)[0]
+    if not _same_speeds(encoded, profile, setup.operating_speed):
+        raise ValueError("the profile is not ramp - dwell - ramp to the operating speed at the "
+                         f"environment's run-up acceleration {alpha:g} rad/s^2 within the "
+                         "preset's dwell ranges, so no DwellProfile action encodes it")
+    return action
+
+
+def _same_speeds(p: SpeedProfile, q: SpeedProfile, operating_speed: float) -> bool:
+    """Whether two profiles reach the same speeds at every breakpoint of either (to 1e-3 of
+    the operating speed: the action is float32)."""
+    knots = np.concatenate([p.breakpoints, q.breakpoints])
+    times = np.unique(np.concatenate([knots, [knots.max() + 1.0]]))
+    return bool(np.all(np.abs(p.speed(times) - q.speed(times)) <= 1e-3 * operating_speed))
 
 
 def action_model(kind: str) -> ActionModel:

@@ -31,6 +31,8 @@ from . import metrics as mt
 from .registry import Policy, resolve
 from .statistics import mean_ci, share_ci
 
+DWELL_ID = "abb_gym/DwellProfile-v0"
+SPEED_ID = "abb_gym/RunUpSpeed-v0"
 UNITS = {**mt.METRICS, "return": "-"}
 METRICS = tuple(UNITS)
 SHARES = tuple(k for k, u in UNITS.items() if u == "share")
@@ -187,6 +189,27 @@ def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
         spec = spec[len("replay:"):] if spec.startswith("replay:") else None
 
 
+def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwargs: Any) -> str:
+    """The environment ``policy`` is evaluated on: ``env_id``, except on DwellProfile for a
+    baseline its one action cannot express (a ``knots`` profile, a dwell at another run-up
+    acceleration, a closed-loop controller), which runs on RunUpSpeed instead.  The machines
+    are the same: every kind draws episode ``k`` from the same preset and seed (tested), and
+    DwellProfile pays what RunUpSpeed pays for the same profile, interval by interval."""
+    if env_id != DWELL_ID:
+        return env_id
+    inner = policy
+    while inner.startswith("replay:"):
+        inner = inner[len("replay:"):]
+    chosen = resolve(inner, env_id, scene)
+    acts_on = getattr(chosen, "acts_on", None)
+    if acts_on is None:
+        return env_id
+    from ..envs.setup import EnvSetup
+    setup = EnvSetup("dwell", scene, preset, **{k: v for k, v in env_kwargs.items()
+                                                 if k == "observe_balls"})
+    return env_id if acts_on(setup) else SPEED_ID
+
+
 def _run_chunk_task(chunk: Chunk):
     """(episodes, rollouts, the policy's parameters) of one chunk."""
     policy = resolve(chunk.policy, chunk.env_id, chunk.scene)
@@ -201,8 +224,11 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
 
     ``executor`` (:class:`abb_gym.execution.Executor`) runs the chunks in parallel; None runs
     them in this process (the vector environment already uses both cores).  Every input is
-    checked before any chunk runs (:func:`check_inputs`)."""
+    checked before any chunk runs (:func:`check_inputs`).  On DwellProfile, a baseline its
+    action cannot express runs on RunUpSpeed, on the same machines (:func:`policy_env_id`);
+    the result's ``env_id`` says where it ran."""
     check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
+    env_id = policy_env_id(env_id, scene, preset, policy, **env_kwargs)
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
     if executor is None:  # this process; the vector environment already uses every core

@@ -44,9 +44,12 @@ def _cell(stat: dict) -> str:
 
 def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEADLINE) -> str:
     rows = []
+    mixed = len({r.env_id for r in results}) > 1
     for r in results:
         s = r.summary()
         row = {"policy": r.policy, "episodes": s["episodes"]}
+        if mixed:  # DwellProfile next to baselines it cannot express (evaluate.policy_env_id)
+            row["env"] = r.env_id.split("/")[-1]
         row.update({f"{k} [{UNITS[k]}]": _cell(s[k]) for k in keys})
         rows.append(row)
     return markdown_table(rows)
@@ -89,6 +92,9 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
             f"seed {first.seed}: {len(first.episodes)} episodes per policy, mean [95 % CI].  "
             f"at_speed: share of episodes that completed the run-up (an unbroken settling "
             f"window in the operating band); residual_vibration over those.\n\n")
+    if len({r.env_id for r in results}) > 1:
+        head += ("Column env: the baselines that DwellProfile's one action cannot express "
+                 "ran on RunUpSpeed, on the same machines (same preset and seeds).\n\n")
     text = head + summary_table(results) + "\n"
     feedback = feedback_values(results)
     if feedback:
@@ -103,7 +109,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
                "seed": first.seed, "metrics": {k: UNITS[k] for k in METRICS},
-               "policies": [{"policy": r.policy, "params": r.params, "summary": r.summary(),
+               "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
                "feedback_value": feedback, "sweep": sweep or []}
     paths["json"].write_text(json.dumps(payload, indent=1, default=_json_default))
