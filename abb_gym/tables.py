@@ -1,7 +1,7 @@
 """Plain-text tables (Markdown) for the command line and the README."""
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 
 def _fmt(value: Any) -> str:
@@ -23,3 +23,12 @@ def markdown_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str] | N
     out = [line(columns), "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
     out += [line(row) for row in cells]
     return "\n".join(out)
+
+
+def markdown_lines(rows: Iterable[Mapping[str, Any]], columns: Sequence[str]) -> Iterator[str]:
+    """The lines of a Markdown table of ``rows`` as they come: the header first, then each row
+    the moment the iterable gives it (cells not padded: no line waits for the widest cell)."""
+    yield "| " + " | ".join(columns) + " |"
+    yield "|" + "|".join("---" for _ in columns) + "|"
+    for r in rows:
+        yield "| " + " | ".join(_fmt(r.get(c, "")) for c in columns) + " |"

@@ -37,3 +37,59 @@ def test_energy_drift_runs_every_integrator():
     assert {r["method"] for r in rows} >= {"rk4", "etdrk4", "ros2", "dopri5", "DOP853", "Radau"}
     assert all(np.isfinite(r["energy_drift_rel"]) and "max_steps" not in r["setting"]
                for r in rows)
+
+
+def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys, monkeypatch):
+    """Every measurement is replaced by an instant stand-in that notes how many table rows
+    stdout already shows when it starts: each must see the rows of all earlier ones."""
+    from abb_gym.benchmarks import effects, env_speed, speed
+    from abb_gym.cli import main
+    stdout: list[str] = []
+    seen: list[tuple[str, int]] = []
+
+    def rows_printed() -> int:
+        stdout.append(capsys.readouterr().out)
+        lines = "".join(stdout).splitlines()
+        return sum(line.startswith("| ") for line in lines) - 1  # less the header
+
+    def stand_in(name, value):
+        def f(*args, **kwargs):
+            seen.append((name, rows_printed()))
+            return value
+        return f
+
+    def runup(repeats):
+        for kernel in ("generic", "specialised"):
+            seen.append((f"run-up {kernel}", rows_printed()))
+            yield {"measurement": f"run-up {kernel}", "value": "1 ms", "target": "-",
+                   "note": "-"}
+
+    def effect_rows(methods=("rk4",), repeats=1):
+        seen.append(("effects", rows_printed()))
+        yield {"case": "effects off", "method": "rk4", "ms_per_simulated_s": 1.0,
+               "us_per_step": 1.0, "dt_s": 1e-4}
+
+    monkeypatch.setattr(speed, "runup_wall_time", runup)
+    monkeypatch.setattr(speed, "stepping_rates", stand_in("stepping", (
+        [{"measurement": "kernel", "value": "1", "target": "-", "note": "-"},
+         {"measurement": "scipy", "value": "1", "target": "-", "note": "-"}], 100.0)))
+    rate = {"rate": 1e6, "reset_us": 1.0, "kernel": "generic"}
+    monkeypatch.setattr(env_speed, "vector_rate", stand_in("vector", rate))
+    monkeypatch.setattr(env_speed, "single_rate", stand_in("single", 1e5))
+    monkeypatch.setattr(env_speed, "cartpole_rates", stand_in("cartpole", (1e6, 1e4)))
+    monkeypatch.setattr(env_speed, "cold_start", stand_in("cold", {
+        "python": 0.01, "import": 0.1, "help": 0.1, "first_step_cached": 1.0}))
+    monkeypatch.setattr(env_speed, "_vector_memory", stand_in("memory", 10.0))
+    monkeypatch.setattr(effects, "iter_speed_rows", effect_rows)
+    assert main(["bench", "speed", "--quick", "--out", str(tmp_path)]) == 0
+    total = rows_printed()
+    # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
+    # general kernel, then CartPole/single/speed-up once both are measured, 2 cold-start rows,
+    # the memory
+    assert seen == [("run-up generic", 0), ("run-up specialised", 1), ("stepping", 2),
+                    ("vector", 4), ("vector", 5), ("vector", 6), ("vector", 7),
+                    ("single", 8), ("cartpole", 8), ("cold", 11), ("memory", 13),
+                    ("effects", 14)]
+    assert total == 15
+    table = (tmp_path / "speed.md").read_text().splitlines()
+    assert len(table) == 2 + total and table[2].startswith("| run-up generic ")

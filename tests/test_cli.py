@@ -106,7 +106,7 @@ def test_output_paths_are_checked_before_computing(argv, tmp_path, capsys, monke
     for target in ("abb_gym.cli.simulate.simulate", "abb_gym.cli.demo.simulate",
                    "abb_gym.evaluation.evaluate.evaluate", "abb_gym.analysis.stability_map",
                    "abb_gym.evaluation.studies.settling_study", "abb_gym.baselines.tuner.tune",
-                   "abb_gym.benchmarks.speed.run_speed",
+                   "abb_gym.benchmarks.speed.iter_speed",
                    "abb_gym.benchmarks.accuracy.run_accuracy"):
         monkeypatch.setattr(target, _refuse)
     blocker = tmp_path / "a_file"

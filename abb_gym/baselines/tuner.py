@@ -131,9 +131,11 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
 
 
 def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset, executor,
-                         per_task=256, env_id=ENV_ID, progress=False, env_kwargs=None):
+                         per_task=256, env_id=ENV_ID, progress=False, env_kwargs=None, bar=None):
     """:func:`evaluate_candidates` with the scene, counts and environment already checked
-    (the tuner and the sweep check them once, not once per CMA-ES generation)."""
+    (the tuner and the sweep check them once, not once per CMA-ES generation).  ``bar``: a
+    tqdm bar counting candidates, advanced as each task's candidates finish (else, with
+    ``progress``, a bar of its own)."""
     for c in candidates:
         build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // episodes)
@@ -143,11 +145,23 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
     tasks = [CandidateTask(env_id, scene_name, preset, family, tuple(cand[a:a + per]),
                            tuple(range(episodes)), seed, kw)
              for a in range(0, len(cand), per)]
-    if executor is None:  # this process; the vector environment already uses every core
-        parts = [_run_candidates(t) for t in tqdm(tasks, desc=f"{family}: candidate batches",
-                                                  disable=not progress or len(tasks) < 2)]
-    else:
-        parts = executor.map(_run_candidates, tasks, desc=f"{family}: candidate batches")
+    own = bar is None and progress
+    if own:
+        bar = tqdm(total=len(cand), desc=f"{family}: candidates", unit="candidate")
+    try:
+        if executor is None:  # this process; the vector environment already uses every core
+            parts = []
+            for t in tasks:
+                parts.append(_run_candidates(t))
+                if bar is not None:
+                    bar.update(len(t.candidates))
+        else:  # the executor shows its tasks; the candidates count when all are back
+            parts = executor.map(_run_candidates, tasks, desc=f"{family}: candidate batches")
+            if bar is not None:
+                bar.update(len(cand))
+    finally:
+        if own:
+            bar.close()
     rows = []
     for a, part in zip(range(0, len(cand), per), parts):
         for c in range(len(tasks[a // per].candidates)):
@@ -168,8 +182,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
 
     space = profiles.search_space(family_class(family))
     default = _evaluate_candidates(scene_name, family, [{}], episodes, seed, preset,
-                                   executor, env_id=env_id, env_kwargs=env_kwargs)[0]
-    bar.update(1)
+                                   executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)[0]
     best = default
     evaluations = 1
     if space:
@@ -181,14 +194,20 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
         if popsize:
             opts["popsize"] = popsize
         es = cma.CMAEvolutionStrategy(np.full(len(space), 0.5), 0.3, opts)
-        while not es.stop():
+        while not es.stop() and evaluations < budget:
             xs = es.ask()
+            # the last generation runs only the candidates the budget has left: the family
+            # never costs more than ``budget`` candidates (a cut generation is not told, the
+            # search ends with it)
+            xs = xs[:budget - evaluations]
             cands = [params_from_unit(family, x, scales) for x in xs]
             rows = _evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
-                                        executor, env_id=env_id, env_kwargs=env_kwargs)
-            es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9 for r in rows])
+                                        executor, env_id=env_id, env_kwargs=env_kwargs,
+                                        bar=bar)
+            if len(xs) == es.popsize:
+                es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9
+                             for r in rows])
             evaluations += len(rows)
-            bar.update(len(rows))
             for r in rows:
                 if r["return"] > best["return"]:
                     best = r
@@ -231,6 +250,9 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
             bar.set_postfix_str(fam)
             best, default, n = _cma_search(fam, scene_name, scales, budget, popsize, episodes,
                                            seed, preset, env_id, executor, bar, env_kwargs)
+            if n < budget:  # the search stopped early (or the family has nothing to search):
+                bar.total -= budget - n  # the bar still ends at its total
+                bar.refresh()
             result["families"][fam] = {
                 "params": _rounded(best["params"]),
                 "mean_return": round(best["return"], 5),
@@ -285,10 +307,11 @@ def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -
 
 
 def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 12,
-          seed: int = 0, preset: str = "test", executor=None, env_id: str = ENV_ID
-          ) -> list[dict]:
+          seed: int = 0, preset: str = "test", executor=None, env_id: str = ENV_ID,
+          progress: bool = True) -> list[dict]:
     """Each family over its box (a Latin hypercube of ``n`` points) on the test preset: rows
-    with the mean settled run-up time and residual."""
+    with the mean settled run-up time and residual.  ``progress``: a bar counting the
+    candidates (``n`` per family with parameters)."""
     families = tuple(families)
     for fam in families:
         family_class(fam)
@@ -296,13 +319,16 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
     check_inputs(env_id, scene_name, preset, seed)
     scales = search_scales(scene_name, env_id, preset)
     rng = np.random.default_rng(seed + 7)
+    swept = [fam for fam in families if profiles.search_space(family_class(fam))]
     rows = []
-    for fam in families:
-        d = len(profiles.search_space(family_class(fam)))
-        if d == 0:
-            continue
-        cube = (np.stack([rng.permutation(n) for _ in range(d)], axis=1) + rng.random((n, d))) / n
-        cands = [params_from_unit(fam, x, scales) for x in cube]
-        rows += _evaluate_candidates(scene_name, fam, cands, episodes, seed, preset, executor,
-                                     env_id=env_id)
+    with tqdm(total=n * len(swept), desc=f"sweep {scene_name}", unit="candidate",
+              disable=not progress) as bar:
+        for fam in swept:
+            bar.set_postfix_str(fam)
+            d = len(profiles.search_space(family_class(fam)))
+            cube = (np.stack([rng.permutation(n) for _ in range(d)], axis=1)
+                    + rng.random((n, d))) / n
+            cands = [params_from_unit(fam, x, scales) for x in cube]
+            rows += _evaluate_candidates(scene_name, fam, cands, episodes, seed, preset,
+                                         executor, env_id=env_id, bar=bar)
     return rows

@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from ..physics import MotorDrive, SpeedProfile, load_scene, simulate
 from ..physics.scene import Scene
 
-__all__ = ["speed_rows", "effect_variants", "sommerfeld_discoidal", "MEASURED_DISCOIDAL"]
+__all__ = ["speed_rows", "iter_speed_rows", "effect_variants", "sommerfeld_discoidal",
+           "MEASURED_DISCOIDAL"]
 
 MEASURED_DISCOIDAL = {"whirl_from": 57.5, "whirl_to": 64.0, "whirl_frequency": 53.0}
 
@@ -56,6 +57,11 @@ def effect_variants() -> list[tuple[str, Scene, Any, float]]:
 
 
 def speed_rows(methods=("rk4", "etdrk4"), repeats: int = 5) -> list[dict[str, Any]]:
+    """The rows of :func:`iter_speed_rows`, at the end."""
+    return list(iter_speed_rows(methods, repeats))
+
+
+def iter_speed_rows(methods=("rk4", "etdrk4"), repeats: int = 5) -> Iterator[dict[str, Any]]:
     """Rows ``{case, effects, method, dt_s, steps, ms_per_simulated_s, us_per_step}``: the best
     of ``repeats`` runs (after one compiling run), default step of each method, 10 ms output.
 
@@ -63,7 +69,6 @@ def speed_rows(methods=("rk4", "etdrk4"), repeats: int = 5) -> list[dict[str, An
     same as before the extension (per step, the flags of the off effects are a handful of
     branches).  RK4 steps shrink with stiff effects (contact, friction) through the step rule;
     ``etdrk4`` treats the drag and friction stiffness exactly and keeps its step."""
-    out = []
     for label, scene, drive, t_end in effect_variants():
         for method in methods:
             simulate(scene, drive, min(t_end, 0.05), method=method, output_dt=0.01)
@@ -72,11 +77,10 @@ def speed_rows(methods=("rk4", "etdrk4"), repeats: int = 5) -> list[dict[str, An
             for _ in range(repeats):
                 tr = simulate(scene, drive, t_end, method=method, output_dt=0.01)
                 best = min(best, tr.wall_time)
-            out.append({"case": label, "effects": ",".join(sorted(scene.effects)) or "-",
-                        "method": method, "dt_s": tr.step, "steps": tr.work,
-                        "ms_per_simulated_s": 1e3 * best / t_end,
-                        "us_per_step": 1e6 * best / max(tr.work, 1)})
-    return out
+            yield {"case": label, "effects": ",".join(sorted(scene.effects)) or "-",
+                   "method": method, "dt_s": tr.step, "steps": tr.work,
+                   "ms_per_simulated_s": 1e3 * best / t_end,
+                   "us_per_step": 1e6 * best / max(tr.work, 1)}
 
 
 # ------------------------------------------------------------------ Sommerfeld, discoidal rig

@@ -20,6 +20,7 @@ import sys
 import tempfile
 import time
 import tracemalloc
+from typing import Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -147,67 +148,68 @@ def _vector_memory(num_envs: int) -> float:
     return peak / 2 ** 20
 
 
-def measure(scipy_rate: float, quick: bool = False) -> list[dict]:
-    """The rows of the environment part of ``abb-gym bench speed``."""
+def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
+    """The rows of the environment part of ``abb-gym bench speed``, each as soon as the
+    measurements it reports are done."""
     from tqdm import tqdm
     repeats = 1 if quick else 3
     steps = {64: 400, 1024: 100, 4096: 30} if not quick else {64: 40, 1024: 10, 4096: 5}
     bar = tqdm(total=len(VECTOR_SIZES) + 5, desc="bench speed (environments)", leave=False)
-    vec = {}
-    for n in VECTOR_SIZES:
-        vec[n] = vector_rate(n, steps[n], "specialised", repeats=repeats)
-        bar.update()
-    generic = vector_rate(1024, steps[1024], "generic", repeats=repeats)
-    bar.update()
-    single = single_rate(3000 if quick else 30000, repeats)
-    bar.update()
-    cp_vec, cp_single = cartpole_rates(1024, 20 if quick else 200)
-    bar.update()
-    cold = cold_start(with_empty_cache=not quick)
-    bar.update()
-    mem = _vector_memory(4096)
-    bar.update()
-    bar.close()
     note = f"{SCENE}, rk4 at the default step, random actions, {EPISODE_STEPS}-step episodes"
-    rows = [{"measurement": f"native vector environment, {n} sub-environments (specialised "
-                            f"kernel), resets included",
-             "value": f"{vec[n]['rate']:,.0f} env-steps/s",
-             "target": ">= 2,500,000" if n == 1024 else "-",
-             "note": f"{note}; reset {vec[n]['reset_us']:.1f} us per sub-environment"}
-            for n in VECTOR_SIZES]
-    rows.append({"measurement": "the same at 1024 with the general kernel (kernel='generic')",
-                 "value": f"{generic['rate']:,.0f} env-steps/s", "target": "-",
-                 "note": f"specialised/general = {vec[1024]['rate'] / generic['rate']:.2f}x"})
-    rows.append({"measurement": "Gymnasium CartPoleVectorEnv, 1024 sub-environments (peer)",
-                 "value": f"{cp_vec:,.0f} env-steps/s", "target": "-",
-                 "note": f"abb-gym costs {cp_vec / vec[1024]['rate']:.1f}x CartPole's per "
-                         f"env-step (target <= 5x); CartPole vector/single "
-                         f"{cp_vec / cp_single:.0f}x, abb-gym {vec[1024]['rate'] / single:.0f}x"})
-    rows.append({"measurement": f"single environment through gym.make ({SCENE}, 10 ms steps)",
-                 "value": f"{single:,.0f} steps/s", "target": ">= 100,000",
-                 "note": f"lean info; CartPole-v1 through gym.make: {cp_single:,.0f} steps/s"})
-    rows.append({"measurement": "speed-up over solve_ivp RK45 + numpy, per 10 ms step",
-                 "value": f"{single / scipy_rate:,.0f}x single, "
-                          f"{vec[1024]['rate'] / scipy_rate:,.0f}x vector (1024)",
-                 "target": "-", "note": "equal or better accuracy"})
-    rows.append({"measurement": "cold start, fresh process: import abb_gym / abb-gym --help",
-                 "value": f"{cold['import']:.2f} s / {cold['help']:.2f} s",
-                 "target": "<= 0.5 s", "note": f"the interpreter alone: {cold['python']:.2f} s"})
-    empty = cold.get("first_step_empty_cache")
-    rows.append({"measurement": "cold start, first gym.make + reset + step (fresh process)",
-                 "value": f"{cold['first_step_cached']:.2f} s with the cache"
-                          + (f", {empty:.1f} s with an empty cache" if empty else ""),
-                 "target": "<= 5 s", "note": "the cache is built by abb-gym build-kernels "
-                                             "and shipped in the wheel"})
-    rows.append({"measurement": "vector environment memory at 4096 sub-environments",
-                 "value": f"{mem:.1f} MB", "target": "-", "note": "peak traced (tracemalloc)"})
     try:
-        from .effects import speed_rows
+        vec = {}
+        for n in VECTOR_SIZES:
+            vec[n] = vector_rate(n, steps[n], "specialised", repeats=repeats)
+            bar.update()
+            yield {"measurement": f"native vector environment, {n} sub-environments "
+                                  f"(specialised kernel), resets included",
+                   "value": f"{vec[n]['rate']:,.0f} env-steps/s",
+                   "target": ">= 2,500,000" if n == 1024 else "-",
+                   "note": f"{note}; reset {vec[n]['reset_us']:.1f} us per sub-environment"}
+        generic = vector_rate(1024, steps[1024], "generic", repeats=repeats)
+        bar.update()
+        yield {"measurement": "the same at 1024 with the general kernel (kernel='generic')",
+               "value": f"{generic['rate']:,.0f} env-steps/s", "target": "-",
+               "note": f"specialised/general = {vec[1024]['rate'] / generic['rate']:.2f}x"}
+        single = single_rate(3000 if quick else 30000, repeats)
+        bar.update()
+        cp_vec, cp_single = cartpole_rates(1024, 20 if quick else 200)
+        bar.update()
+        yield {"measurement": "Gymnasium CartPoleVectorEnv, 1024 sub-environments (peer)",
+               "value": f"{cp_vec:,.0f} env-steps/s", "target": "-",
+               "note": f"abb-gym costs {cp_vec / vec[1024]['rate']:.1f}x CartPole's per "
+                       f"env-step (target <= 5x); CartPole vector/single "
+                       f"{cp_vec / cp_single:.0f}x, abb-gym {vec[1024]['rate'] / single:.0f}x"}
+        yield {"measurement": f"single environment through gym.make ({SCENE}, 10 ms steps)",
+               "value": f"{single:,.0f} steps/s", "target": ">= 100,000",
+               "note": f"lean info; CartPole-v1 through gym.make: {cp_single:,.0f} steps/s"}
+        yield {"measurement": "speed-up over solve_ivp RK45 + numpy, per 10 ms step",
+               "value": f"{single / scipy_rate:,.0f}x single, "
+                        f"{vec[1024]['rate'] / scipy_rate:,.0f}x vector (1024)",
+               "target": "-", "note": "equal or better accuracy"}
+        cold = cold_start(with_empty_cache=not quick)
+        bar.update()
+        yield {"measurement": "cold start, fresh process: import abb_gym / abb-gym --help",
+               "value": f"{cold['import']:.2f} s / {cold['help']:.2f} s",
+               "target": "<= 0.5 s", "note": f"the interpreter alone: {cold['python']:.2f} s"}
+        empty = cold.get("first_step_empty_cache")
+        yield {"measurement": "cold start, first gym.make + reset + step (fresh process)",
+               "value": f"{cold['first_step_cached']:.2f} s with the cache"
+                        + (f", {empty:.1f} s with an empty cache" if empty else ""),
+               "target": "<= 5 s", "note": "the cache is built by abb-gym build-kernels "
+                                           "and shipped in the wheel"}
+        mem = _vector_memory(4096)
+        bar.update()
+        yield {"measurement": "vector environment memory at 4096 sub-environments",
+               "value": f"{mem:.1f} MB", "target": "-", "note": "peak traced (tracemalloc)"}
+    finally:
+        bar.close()
+    try:
+        from .effects import iter_speed_rows
     except ImportError:
-        return rows
-    for r in speed_rows(repeats=2 if quick else 5):
-        rows.append({"measurement": f"simulate {r['method']}, {r['case']}",
-                     "value": f"{r['ms_per_simulated_s']:.2f} ms per simulated s",
-                     "target": "effects off: as fast as before" if "off" in r["case"] else "-",
-                     "note": f"{r['us_per_step']:.2f} us/step, dt {r['dt_s'] * 1e3:.2f} ms"})
-    return rows
+        return
+    for r in iter_speed_rows(repeats=2 if quick else 5):
+        yield {"measurement": f"simulate {r['method']}, {r['case']}",
+               "value": f"{r['ms_per_simulated_s']:.2f} ms per simulated s",
+               "target": "effects off: as fast as before" if "off" in r["case"] else "-",
+               "note": f"{r['us_per_step']:.2f} us/step, dt {r['dt_s'] * 1e3:.2f} ms"}

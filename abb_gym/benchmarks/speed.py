@@ -11,11 +11,13 @@ Measurements (the targets are the project's, from the Integrators issue):
   at 1024 sub-environments (when :mod:`abb_gym.envs` is installed), and its memory at 4096.
 
 Wall times are the best of several repeats; the machine is shared and noisy, so these are
-benchmarks, not tests.
+benchmarks, not tests.  :func:`iter_speed` yields each row as soon as it is measured (the
+command prints it then); :func:`run_speed` collects them.
 """
 from __future__ import annotations
 
 import time
+from typing import Iterator
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -40,19 +42,18 @@ def _best(fn, repeats):
     return best, out
 
 
-def runup_wall_time(repeats: int = 20) -> list[dict]:
+def runup_wall_time(repeats: int = 20) -> Iterator[dict]:
+    """The row of each kernel, as it is measured."""
     scene = load_scene("yoshida_odd")
     drive = SpeedProfile.dwell(40.0, scene.critical_speed, 0.5)
-    rows = []
     for kernel in ("generic", "specialised"):
         simulate(scene, drive, 0.1, kernel=kernel)
         wall, tr = _best(lambda: simulate(scene, drive, RUNUP_S, output_dt=CONTROL_DT,
                                           kernel=kernel), repeats)
-        rows.append({"measurement": f"Yoshida run-up, 6 s simulated, default accuracy "
-                                    f"(simulate, RK4, kernel={kernel!r})",
-                     "value": f"{wall * 1e3:.2f} ms", "target": "<= 5 ms",
-                     "note": f"step {tr.step * 1e3:.2f} ms, {tr.work} steps"})
-    return rows
+        yield {"measurement": f"Yoshida run-up, 6 s simulated, default accuracy "
+                              f"(simulate, RK4, kernel={kernel!r})",
+               "value": f"{wall * 1e3:.2f} ms", "target": "<= 5 ms",
+               "note": f"step {tr.step * 1e3:.2f} ms, {tr.work} steps"}
 
 
 def _kernel_steps(scene, profile, n_steps, dt):
@@ -130,13 +131,22 @@ def stepping_rates(quick: bool = False) -> tuple[list[dict], float]:
     return rows, rate_s
 
 
-def run_speed(quick: bool = False) -> list[dict]:
-    rows = runup_wall_time(5 if quick else 20)
+#: the columns of every row
+COLUMNS = ("measurement", "value", "target", "note")
+
+
+def iter_speed(quick: bool = False) -> Iterator[dict]:
+    """Every row of the benchmark, each as soon as it is measured."""
+    yield from runup_wall_time(5 if quick else 20)
     step_rows, scipy_rate = stepping_rates(quick)
-    rows += step_rows
+    yield from step_rows
     try:
         from . import env_speed
     except ImportError:  # the environments are not installed
-        return rows
-    rows += env_speed.measure(scipy_rate, quick=quick)
-    return rows
+        return
+    yield from env_speed.measure(scipy_rate, quick=quick)
+
+
+def run_speed(quick: bool = False) -> list[dict]:
+    """Every row of the benchmark (:func:`iter_speed`), at the end."""
+    return list(iter_speed(quick))

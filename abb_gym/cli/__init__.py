@@ -27,6 +27,7 @@ SUBCOMMANDS = [
     "abb_gym.cli.study",
     "abb_gym.cli.train",
     "abb_gym.cli.kernels",
+    "abb_gym.cli.render",
 ]
 
 

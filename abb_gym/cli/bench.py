@@ -4,9 +4,10 @@ throughput."""
 from __future__ import annotations
 
 import csv
+import sys
 from pathlib import Path
 
-from ..tables import markdown_table
+from ..tables import markdown_lines, markdown_table
 from .outputs import output_folder
 
 
@@ -48,10 +49,22 @@ def run_accuracy(args) -> int:
 
 
 def run_speed(args) -> int:
-    from ..benchmarks.speed import run_speed as bench
+    """Each row printed as soon as it is measured (above the progress bars); speed.md gets
+    the aligned table at the end."""
+    from tqdm import tqdm
+
+    from ..benchmarks.speed import COLUMNS, iter_speed
     out = output_folder(args.out, "--out")
-    rows = bench(quick=args.quick)
-    text = markdown_table(rows)
-    (out / "speed.md").write_text(text + "\n")
-    print(text)
+    rows: list[dict] = []
+
+    def measured():
+        for row in iter_speed(quick=args.quick):
+            rows.append(row)
+            yield row
+
+    for line in markdown_lines(measured(), COLUMNS):
+        tqdm.write(line, file=sys.stdout)
+        sys.stdout.flush()
+    (out / "speed.md").write_text(markdown_table(rows, COLUMNS) + "\n")
+    print(f"wrote {out / 'speed.md'}")
     return 0

@@ -24,6 +24,8 @@ import numpy as np
 
 __all__ = ["Renderer", "display_available"]
 
+#: top of the strip along the bottom of the figure that holds the legends [figure fraction]
+LEGEND_TOP = 0.15
 _NON_INTERACTIVE = {"agg", "pdf", "ps", "svg", "cairo", "template", "pgf"}
 
 
@@ -69,8 +71,9 @@ class Renderer:
     def _build(self) -> None:
         sc = self.scene
         fig = self.fig
-        self.ax_orbit = fig.add_axes((0.03, 0.08, 0.42, 0.84))
-        self.ax_speed = fig.add_axes((0.56, 0.14, 0.36, 0.76))
+        # the bottom strip (below LEGEND_TOP) holds the legends, outside both panels
+        self.ax_orbit = fig.add_axes((0.02, LEGEND_TOP + 0.02, 0.44, 0.91 - LEGEND_TOP))
+        self.ax_speed = fig.add_axes((0.56, LEGEND_TOP + 0.13, 0.36, 0.78 - LEGEND_TOP))
         ax = self.ax_orbit
         ax.set_aspect("equal")
         ax.set_xlim(-1.25, 1.25)
@@ -78,30 +81,46 @@ class Renderer:
         ax.set_xticks([])
         ax.set_yticks([])
         th = np.linspace(0, 2 * np.pi, 129)
-        ax.plot(np.cos(th), np.sin(th), "k--", lw=0.8)
+        (clearance,) = ax.plot(np.cos(th), np.sin(th), "k--", lw=0.8,
+                               label="housing clearance")
         ax.set_title(f"{sc.name}: orbit / clearance {sc.housing_clearance * 1e3:.3g} mm",
                      fontsize=9)
-        (self.orbit_line,) = ax.plot([], [], color="tab:blue", lw=0.8)
+        (self.orbit_line,) = ax.plot([], [], color="tab:blue", lw=0.8,
+                                     label="orbit of the rotor centre")
         # the race is drawn with radius 0.35 of the panel (not to scale)
         self.race_r = 0.35
-        (self.race_line,) = ax.plot([], [], color="0.4", lw=1.2)
-        (self.balls_line,) = ax.plot([], [], "o", color="tab:green", ms=8, mec="k")
-        (self.imb_line,) = ax.plot([], [], "s", color="tab:red", ms=7, mec="k")
-        (self.centre_line,) = ax.plot([], [], "+", color="k", ms=8)
-        self.text = ax.text(-1.2, -1.2, "", fontsize=8, va="bottom")
+        (self.race_line,) = ax.plot([], [], color="0.4", lw=1.2, label="race (not to scale)")
+        (self.balls_line,) = ax.plot([], [], "o", color="tab:green", ms=8, mec="k",
+                                     label=f"balls ({sc.ball_count})")
+        (self.imb_line,) = ax.plot([], [], "s", color="tab:red", ms=7, mec="k",
+                                   label="angle of the imbalance")
+        (self.centre_line,) = ax.plot([], [], "+", color="k", ms=8, label="rotor centre")
+        self.legend_orbit = fig.legend(
+            handles=[self.balls_line, self.imb_line, self.centre_line, self.race_line,
+                     self.orbit_line, clearance],
+            loc="lower center", bbox_to_anchor=(0.24, 0.0), ncol=2, fontsize=7,
+            frameon=False, handlelength=1.6, columnspacing=1.0, labelspacing=0.3,
+            borderaxespad=0.2)
         ax2 = self.ax_speed
         ax2.set_xlim(0, self.episode_length)
         ax2.set_ylim(-0.05, 1.3)
-        ax2.axhline(1.0, color="k", ls="--", lw=0.8)
+        operating = ax2.axhline(1.0, color="k", ls=":", lw=0.8, label="operating speed")
         ax2.set_xlabel("time [s]", fontsize=9)
         ax2.set_ylabel("speed / operating speed", fontsize=9, color="tab:blue")
         ax2.tick_params(labelsize=8)
-        (self.speed_line,) = ax2.plot([], [], color="tab:blue", lw=1.2)
+        (self.speed_line,) = ax2.plot([], [], color="tab:blue", lw=1.2, label="rotor speed")
         self.ax_whirl = ax2.twinx()
         self.ax_whirl.set_ylim(0, 1.05)
         self.ax_whirl.set_ylabel("whirl / clearance", fontsize=9, color="tab:orange")
         self.ax_whirl.tick_params(labelsize=8)
-        (self.whirl_line,) = self.ax_whirl.plot([], [], color="tab:orange", lw=0.8)
+        (self.whirl_line,) = self.ax_whirl.plot([], [], color="tab:orange", lw=0.8,
+                                                label="whirl radius (right axis)")
+        self.legend_speed = fig.legend(
+            handles=[self.speed_line, operating, self.whirl_line], loc="lower center",
+            bbox_to_anchor=(0.74, 0.0), ncol=2, fontsize=7, frameon=False, handlelength=1.6,
+            columnspacing=1.0, labelspacing=0.3, borderaxespad=0.2)
+        # time, speed and whirl now: the speed panel's title, clear of both drawings
+        self.text = ax2.set_title("", fontsize=8)
 
     def draw(self, state: np.ndarray, trace: np.ndarray) -> np.ndarray | None:
         """Draw one frame: ``state`` is the model state, ``trace`` rows (t, x, y, w) so far."""
@@ -123,7 +142,7 @@ class Renderer:
         self.speed_line.set_data(t, trace[:, 3] / self.operating_speed)
         self.whirl_line.set_data(t, np.hypot(trace[:, 1], trace[:, 2]) / clear)
         now = t[-1] if len(t) else 0.0
-        self.text.set_text(f"t = {now:.2f} s   speed = {state[nq + 2]:.1f} rad/s\n"
+        self.text.set_text(f"t = {now:.2f} s   speed = {state[nq + 2]:.1f} rad/s   "
                            f"whirl = {math.hypot(state[0], state[1]) * 1e3:.3g} mm")
         if self.window:
             self.fig.canvas.draw_idle()

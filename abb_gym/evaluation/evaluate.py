@@ -90,12 +90,14 @@ def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
                         scene=scene, preset=preset, record_history=True, **env_kwargs)
 
 
-def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]]:
+def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict[int, Rollout]]:
     """Run the chunk's episodes; returns (per-episode metrics, recorded rollouts).
 
     ``policy``: None (resolve ``chunk.policy``), a Policy, or a callable ``f(env) -> Policy``
     (for policies that depend on the environment, e.g. one profile per sub-environment).
-    Episode indices may repeat (the same machine under different candidates of a sweep)."""
+    Episode indices may repeat (the same machine under different candidates of a sweep).
+    ``on_step(env, done)``, if given, is called after the reset and after every step, with
+    the episodes ended so far (``abb-gym render`` draws its frames there)."""
     n = len(chunk.indices)
     env = make_env(chunk.env_id, chunk.scene, chunk.preset, n, **dict(chunk.env_kwargs))
     if policy is None:
@@ -106,6 +108,8 @@ def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]
     setup = native.setup
     obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices])
     policy.reset(env, np.ones(n, bool))
+    if on_step is not None:
+        on_step(env, np.zeros(n, bool))
     actions = np.zeros((setup.max_steps + 1, n, setup.n_actions))
     counts = np.zeros(n, dtype=np.int64)
     ret = np.zeros(n)
@@ -138,6 +142,8 @@ def run_chunk(chunk: Chunk, policy=None) -> tuple[list[dict], dict[int, Rollout]
                 rollouts[k] = Rollout(setup.scene, hist["t"], hist["rotor_speed"],
                                       vib / ref_len, hist["ball_angles"], act_j)
         done |= live & (term | trunc)
+        if on_step is not None:
+            on_step(env, done.copy())
     env.close()
     return episodes, rollouts
 

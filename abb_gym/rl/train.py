@@ -194,6 +194,28 @@ def _make_eval_callback_class():
     return _TestSetEvalCallback
 
 
+def _make_progress_callback_class():
+    from stable_baselines3.common.callbacks import ProgressBarCallback
+
+    class _ProgressBar(ProgressBarCallback):
+        """SB3's progress bar (tqdm + rich), stopped at its total: PPO collects whole
+        rollouts of ``n_steps x n_envs`` steps, so training runs past ``n_timesteps`` unless
+        it is a multiple of that, and SB3's bar counts on past its own total."""
+
+        def _on_step(self) -> bool:
+            left = self.pbar.total - self.pbar.n
+            if left > 0:
+                self.pbar.update(min(self.training_env.num_envs, left))
+            return True
+
+    return _ProgressBar
+
+
+def ProgressBar():
+    """The training progress bar (built lazily: SB3 is imported on first use)."""
+    return _make_progress_callback_class()()
+
+
 def TestSetEvalCallback(*args, **kwargs):
     """The test-set evaluation callback (built lazily: SB3 is imported on first use)."""
     return _make_eval_callback_class()(*args, **kwargs)
@@ -292,7 +314,8 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
     :param seed: seed of everything random in training (>= 0).
     :param run_dir: output folder (default :func:`default_run_dir`); created if missing.
-    :param progress: show SB3's progress bar (tqdm + rich).
+    :param progress: show SB3's progress bar (tqdm + rich), ending at ``cfg.n_timesteps``
+        (training itself ends with the rollout that reaches it).
     :param torch_threads: ``torch.set_num_threads`` (1 is fastest for these small networks on
         a busy 2-core machine); None leaves torch's default.
     :param final_eval: evaluate the final model on the test set (``evaluation.json``).
@@ -349,8 +372,10 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                             str(run_dir / "checkpoints"), name_prefix="ppo",
                                             save_vecnormalize=cfg.normalize is not None))
+    if progress:
+        callbacks.append(ProgressBar())
     t0 = time.perf_counter()
-    model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=progress,
+    model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=False,
                 tb_log_name=tensorboard_run_name(cfg, seed))
     wall = time.perf_counter() - t0
     steps = int(model.num_timesteps)

@@ -1,0 +1,67 @@
+"""``abb-gym render``: one episode of a policy as a video (GIF or MP4).
+
+    abb-gym render --policy baseline:knots --out out/render/knots.gif
+    abb-gym render --env abb_gym/RunUpTorque-v0 --policy ppo:runup_torque_yoshida_odd \\
+        --episode 3 --out out/render/torque.mp4 --fps 30
+
+Episode K with --seed S is the machine of test episode K of ``abb-gym evaluate --seed S``.
+Policies: ``baseline:NAME``, ``ppo:NAME|PATH``, ``replay:SPEC`` (as for evaluate).  A frame
+shows the machine along the shaft (orbit, race, balls, imbalance angle) and the speed and
+whirl so far; by default one frame per 1/fps seconds of the run-up (real time), --every N
+takes one frame per N control steps instead (fewer frames: a smaller file, a faster video).
+Needs the optional extra: pip install 'abb-gym[video]'.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+
+
+def register(sub) -> None:
+    p = sub.add_parser("render", help="write one episode of a policy as a GIF or MP4 video",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--env", default="abb_gym/RunUpSpeed-v0", help="environment id")
+    p.add_argument("--scene", default="yoshida_odd", help="scene name")
+    p.add_argument("--preset", default="test", help="environment preset")
+    p.add_argument("--policy", required=True, help="baseline:NAME, ppo:NAME|PATH or replay:SPEC")
+    p.add_argument("--episode", type=int, default=0,
+                   help="test episode K (the environment reset with seed + K)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the test set")
+    p.add_argument("--out", default=None,
+                   help="the video file, .gif or .mp4 (default "
+                        "out/render/<scene>_<policy>_<episode>.gif; folders created)")
+    p.add_argument("--fps", type=float, default=25.0, help="frames per second of the video")
+    p.add_argument("--every", type=int, default=None, metavar="N",
+                   help="one frame per N control steps (default: real time at --fps)")
+    p.add_argument("--steps", type=int, default=None, metavar="N",
+                   help="stop the episode after N control steps (default: the whole episode)")
+    p.set_defaults(func=run)
+
+
+def default_out(scene: str, policy: str, episode: int) -> str:
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", policy).strip("-")
+    return f"out/render/{scene}_{safe}_{episode}.gif"
+
+
+def run(args) -> int:
+    from ..evaluation.video import check_video, render_episode
+    from .outputs import output_file
+    out = args.out or default_out(args.scene, args.policy, args.episode)
+    check_video(out, args.fps)  # suffix, fps and the extra before any folder is made
+    output_file(out, "--out")
+    if args.env == "abb_gym/DwellProfile-v0":
+        print("abb-gym render: note: a DwellProfile episode is one step (its whole run-up): "
+              "the video has two frames, before and after", file=sys.stderr)
+    res = render_episode(args.env, args.scene, args.policy, out, episode=args.episode,
+                         seed=args.seed, preset=args.preset, fps=args.fps, every=args.every,
+                         steps=args.steps)
+    m = res["metrics"]
+    resid = m["residual_vibration"]
+    print(f"wrote {res['path']}: {res['frames']} frames of {res['width']} x {res['height']} at "
+          f"{res['fps']:g} fps, one per {res['every']} control step(s); episode {args.episode} "
+          f"(seed {m['seed']}): {res['steps']} steps, return {m['return']:.4g}, "
+          + (f"residual vibration {resid:.4g} (W/e)" if math.isfinite(resid)
+             else "not settled at the operating speed"))
+    return 0

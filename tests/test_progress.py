@@ -1,0 +1,104 @@
+"""Progress bars that count what they say and stop at their total: the baseline sweep of
+``abb-gym evaluate --sweep``, the tuner (candidates, within the budget) and training.  (The
+streamed rows of ``abb-gym bench speed``: tests/test_bench.py.)"""
+from __future__ import annotations
+
+import pytest
+from tqdm import tqdm
+
+from abb_gym.baselines import tuner
+
+SCENE = "yoshida_odd"
+SHORT = {"max_episode_steps": 4}  # episodes of a few control steps: the bars, not the physics
+
+
+def recording_tqdm():
+    """A tqdm class that keeps, per bar, its description, unit, total, every update and the
+    largest count it showed."""
+    class Recording(tqdm):
+        bars: list[dict] = []
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            # a disabled bar has no description (tqdm returns early)
+            self.record = {"desc": getattr(self, "desc", ""), "unit": getattr(self, "unit", ""),
+                           "updates": [], "most": 0}
+            Recording.bars.append(self.record)
+
+        def update(self, n=1):
+            out = super().update(n)
+            self.record["updates"].append(n)
+            self.record["most"] = max(self.record["most"], self.n)
+            return out
+
+        def close(self):
+            if not self.disable:
+                self.record.update(total=self.total, n=self.n)
+            super().close()
+
+    return Recording
+
+
+def test_candidates_bar_counts_candidates_not_tasks(monkeypatch):
+    bar = recording_tqdm()
+    monkeypatch.setattr(tuner, "tqdm", bar)
+    rows = tuner.evaluate_candidates(SCENE, "ramp", [{}, {}, {}], episodes=1, seed=0,
+                                     preset="train", per_task=2, progress=True,
+                                     env_kwargs=SHORT)
+    assert len(rows) == 3
+    [rec] = bar.bars
+    # two tasks (2 + 1 candidates); the bar counts the candidates as each task finishes
+    assert rec["unit"] == "candidate" and rec["total"] == 3 and rec["n"] == 3
+    assert rec["updates"] == [2, 1]
+
+
+def test_tuner_stays_within_its_budget_and_its_bar_ends_at_its_total(monkeypatch):
+    """budget 4 with populations of 2: the default, one generation, and one candidate of the
+    next (before: the whole next generation, 5 candidates, a bar at 5/4)."""
+    bar = recording_tqdm()
+    monkeypatch.setattr(tuner, "tqdm", bar)
+    result = tuner.tune(SCENE, families=("speed_dwell", "ramp"), budget=4, popsize=2,
+                        episodes=1, seed=0, env_kwargs=SHORT)
+    assert result["families"]["speed_dwell"]["candidates"] == 4
+    assert result["families"]["ramp"]["candidates"] <= 4
+    [rec] = [b for b in bar.bars if b["desc"].startswith("tune")]
+    assert rec["unit"] == "candidate"
+    assert rec["most"] <= rec["total"] and rec["n"] == rec["total"]
+    assert rec["n"] == sum(f["candidates"] for f in result["families"].values())
+
+
+def test_sweep_has_a_candidate_bar(monkeypatch):
+    bar = recording_tqdm()
+    monkeypatch.setattr(tuner, "tqdm", bar)
+    rows = tuner.sweep(SCENE, families=("ramp", "speed_dwell"), n=2, episodes=1)
+    assert len(rows) == 4
+    [rec] = [b for b in bar.bars if b["desc"] == f"sweep {SCENE}"]
+    assert rec["unit"] == "candidate" and rec["total"] == 4 and rec["n"] == 4
+    assert rec["updates"] == [2, 2]
+
+
+def test_sweep_without_progress_shows_no_bar(monkeypatch, capsys):
+    rows = tuner.sweep(SCENE, families=("ramp",), n=2, episodes=1, progress=False)
+    assert len(rows) == 2
+    assert capsys.readouterr().err == ""
+
+
+def test_training_bar_stops_at_its_total(tmp_path, monkeypatch):
+    """20 steps asked, rollouts of 2 x 8 = 16 steps: training runs 32 steps, the bar shows
+    20/20 (SB3's own bar ends at 32/20)."""
+    pytest.importorskip("stable_baselines3")
+    import stable_baselines3.common.callbacks as sb3_callbacks
+
+    from abb_gym.rl.config import TrainConfig
+    from abb_gym.rl.train import train
+    bar = recording_tqdm()
+    monkeypatch.setattr(sb3_callbacks, "tqdm", bar)
+    cfg = TrainConfig.from_mapping("abb_gym/RunUpSpeed-v0", {
+        "n_envs": 2, "n_timesteps": 20, "policy": "BoundedMlpPolicy", "n_steps": 8,
+        "batch_size": 8, "n_epochs": 1, "policy_kwargs": {"net_arch": [8]},
+        "env_kwargs": {"scene": SCENE, "preset": "train", "control_interval": 0.05},
+        "eval_freq": 0, "eval_episodes": 1, "checkpoint_freq": 0})
+    res = train(cfg, seed=0, run_dir=tmp_path / "run", progress=True, final_eval=False)
+    assert res.env_steps == 32
+    [rec] = bar.bars
+    assert rec["total"] == 20 and rec["n"] == 20 and rec["most"] == 20
