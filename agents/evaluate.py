@@ -112,8 +112,14 @@ def agent_table(results) -> str:
 
 
 def goal_line(check: dict) -> str:
+    import math
     res, run, fb = check["residual"], check["run_up_time"], check["feedback_value"]
     yes = {True: "met", False: "NOT met"}
+    if not math.isfinite(res["ppo"]):  # no episode settled: no residual to compare
+        return (f"NOT met: PPO never held the operating speed (at speed "
+                f"{check['at_speed']['ppo']:.2f} against {check['at_speed']['knots']:.2f}; "
+                f"settled run-up {run['ppo']:.2f} s, the episode limit, against "
+                f"{run['knots']:.2f} s)")
     return (f"residual {res['ppo']:.3f} vs knots {res['knots']:.3f} W_r/e "
             f"({100 * res['reduction']:+.0f} %, knots - PPO {_cell(res['knots_minus_ppo'])}; "
             f">= 20 %: {yes[check['goal_residual']]}); settled run-up {run['ppo']:.2f} vs "
