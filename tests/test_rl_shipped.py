@@ -51,3 +51,29 @@ def test_shipped_agent_loads_and_runs(name):
     extra = {"observe_balls": True} if penv.get("observe_balls") else {}
     rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **extra)
     assert np.isfinite(rows[0]["return"])
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_evaluate_compares_every_agent_with_knots_and_its_replay(name, tmp_path, capsys):
+    """`abb-gym evaluate --policy ppo:NAME --policy baseline:knots --policy replay:ppo:NAME`
+    works for every shipped agent, on its own environment (DwellProfile: knots on RunUpSpeed,
+    the same machines), and the report carries the feedback value and the new metrics."""
+    import json
+
+    from abb_gym.cli import main
+    meta = yaml.safe_load((trained_dir() / name / "config.yml").read_text())["_run"]
+    rc = main(["evaluate", "--env", meta["env_id"], "--scene", meta["policy_env"]["scene"],
+               "--policy", f"ppo:{name}", "--policy", "baseline:knots",
+               "--policy", f"replay:ppo:{name}", "--episodes", "2", "--out", str(tmp_path)])
+    assert rc == 0
+    report = json.loads((tmp_path / "evaluation.json").read_text())
+    by_policy = {p["policy"].split(" (")[0]: p for p in report["policies"]}
+    assert set(by_policy) == {f"ppo:{name}", "baseline:knots", f"replay:ppo:{name}"}
+    for p in by_policy.values():
+        for key in ("run_up_time", "first_at_speed", "at_speed", "residual_vibration"):
+            assert key in p["summary"]
+    assert by_policy[f"ppo:{name}"]["env_id"] == meta["env_id"]
+    assert f"ppo:{name}" in report["feedback_value"]
+    knots_env = by_policy["baseline:knots"]["env_id"]
+    assert knots_env == ("abb_gym/RunUpSpeed-v0" if "DwellProfile" in meta["env_id"]
+                         else meta["env_id"])
