@@ -22,7 +22,8 @@ from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.evaluation.registry import resolve  # noqa: E402
 from abb_gym.rl import (PPOPolicy, load_config, load_policy, make_native_env,  # noqa: E402
                         run_episodes, summarise)
-from abb_gym.rl.config import TrainConfig, configs_dir, eval_env_kwargs  # noqa: E402
+from abb_gym.rl.config import (TrainConfig, configs_dir, eval_env_kwargs,  # noqa: E402
+                               zoo_problems)
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 
@@ -78,6 +79,8 @@ def test_every_shipped_config_loads():
     ("bogus_key", 1, r"unknown key\(s\) \['bogus_key'\]"),
     ("policy_kwargs", {"activation_fn": "Nope"}, "activation_fn must name a torch.nn"),
     ("eval_episodes", 0, r"'eval_episodes' must be an integer in \[1, 1e\+06\]"),
+    # rl_zoo3 passes its own tensorboard_log to PPO: the key belongs in _abb_gym
+    ("tensorboard_log", "tb", r"field 'tensorboard_log' belongs in the _abb_gym section"),
 ])
 def test_config_errors_name_the_field(key, value, match):
     raw = dict(SMOKE[SPEED], **{key: value})
@@ -115,8 +118,10 @@ def test_smoke_run_writes_the_run_folder(smoke_run):
     assert ev["summary"]["episodes"] == 4
     npz = np.load(smoke_run / "evaluations.npz")
     assert npz["results"].shape[1] == 4
-    # the run's config.yml trains again as it is (zoo style, keyed by the env id)
+    # the run's config.yml trains again as it is (zoo style, keyed by the env id), with
+    # abb-gym train and, although SMOKE is in the first-wave format, with rl_zoo3
     assert load_config(smoke_run / "config.yml").n_timesteps == 2048
+    assert zoo_problems(smoke_run / "config.yml") == []
     # the manifest fingerprints the final and the best model and statistics
     manifest = yaml.safe_load((smoke_run / "agent.yml").read_text())
     assert set(manifest["files"]) == {"model.zip", "vecnormalize.pkl", "best_model.zip",

@@ -1,16 +1,22 @@
 """PPO training configurations (rl-baselines3-zoo format) and the environments they build.
 
-A file in ``configs/ppo/`` holds, under the environment id, hyperparameters that
-rl-baselines3-zoo reads unchanged (``python -m rl_zoo3.train --algo ppo --env
-abb_gym/RunUpSpeed-v0 --gym-packages abb_gym -conf FILE``), and under ``_abb_gym`` the
-settings only ``abb-gym train`` uses (rl_zoo3 ignores keys that are not environment ids)::
+A file in ``configs/ppo/`` is an rl-baselines3-zoo hyperparameter file: rl_zoo3 trains it
+unchanged, and ``abb-gym train`` reads the same file::
+
+    pip install -c constraints.txt rl_zoo3
+    python -m rl_zoo3.train --algo ppo --env abb_gym/RunUpSpeed-v0 --gym-packages abb_gym \\
+        -conf configs/ppo/runup_speed_yoshida_odd.yml
+    abb-gym train --config runup_speed_yoshida_odd
+
+The entry under the environment id holds what both read; ``_abb_gym`` holds the settings only
+``abb-gym train`` uses::
 
     abb_gym/RunUpSpeed-v0:
       n_envs: 16                    # sub-environments of the native vector environment
       n_timesteps: 800000           # environment steps (all sub-environments together)
       policy: abb_gym.rl.networks.BoundedMlpPolicy     # or MlpPolicy
       normalize: "dict(norm_obs=True, norm_reward=True)"   # true/false or VecNormalize kwargs
-      policy_kwargs: "dict(net_arch=[64, 64], activation_fn=nn.Tanh)"
+      policy_kwargs: "dict(net_arch=[64, 64], activation_fn=nn.Tanh, action_mean_init=0.5)"
       learning_rate: lin_3.0e-4     # a number or lin_<start> (linear decay to 0)
       n_steps: 256                  # ... any other PPO keyword
       env_kwargs:                   # gym.make keywords: scene, preset, observe_balls,
@@ -24,25 +30,59 @@ settings only ``abb-gym train`` uses (rl_zoo3 ignores keys that are not environm
       eval_seed: 1000               # seed of the test set
       checkpoint_freq: 200000       # env steps between checkpoints (0: none)
       bootstrap_truncated: true     # report truncations to SB3 as TimeLimit.truncated
+      tensorboard_log: tb           # TensorBoard event files (as --tensorboard-log DIR)
 
 The keys, declared once on :class:`TrainConfig`:
 
 {table}
 
-Any other key under the id must be a PPO keyword argument (``tensorboard_log: DIR``
-included: TensorBoard event files, as ``abb-gym train --tensorboard-log DIR``).  The
-``_abb_gym`` keys are also accepted under the id (files of the first wave).
-``policy_kwargs`` and ``normalize`` may be mappings or the zoo's Python strings, which are
-read without evaluating code (:func:`abb_gym.configuration.parse_python_literal`: literals,
-``dict(...)`` and ``nn.X``); ``activation_fn`` may name a ``torch.nn`` activation (``Tanh``).
-A file may hold several ids; ``load_config(path, env_id)`` picks one.  Top-level keys
-starting with ``_`` other than ``_abb_gym`` are ignored (a run's ``config.yml`` keeps its
-metadata under ``_run``, so it can be trained again as it is).
+Any other key under the id must be a PPO keyword argument.  ``policy_kwargs`` and
+``normalize`` are the zoo's Python strings (or mappings), which ``abb-gym train`` reads
+without evaluating code (:func:`abb_gym.configuration.parse_python_literal`: literals,
+``dict(...)`` and ``nn.X``).  A file may hold several ids; ``load_config(path, env_id)`` picks
+one.  Top-level keys starting with ``_`` other than ``_abb_gym`` are ignored (a run's
+``config.yml`` keeps its metadata under ``_run``; it is in this format, so both ``abb-gym
+train`` and rl_zoo3 train it again as it is).
+
+Why this layout (what rl_zoo3 does with a file: ``rl_zoo3/exp_manager.py``,
+``read_hyperparameters`` and ``_preprocess_hyperparams``):
+
+* rl_zoo3 reads only the entry under ``--env``; every key there that it does not consume
+  itself (``n_envs``, ``n_timesteps``, ``normalize``, ``env_kwargs``, ``policy_kwargs`` ...)
+  goes to ``PPO(...)``, which rejects unknown keywords.  The evaluation, checkpoint and
+  TensorBoard settings have no config-file counterpart in the zoo (it takes ``--eval-freq``,
+  ``--eval-episodes``, ``--eval-env-kwargs``, ``--save-freq``, ``--tensorboard-log`` on its
+  command line, and passes ``tensorboard_log`` to PPO itself, so the key under the id would
+  be given twice), so they live in a separate top-level section the zoo never looks at.
+  ``_abb_gym`` starts with ``_`` and therefore can never be an environment id.
+* The bounded policy is named by its import path: rl_zoo3 imports a ``policy`` containing a
+  dot (``get_class_by_name``), and ``abb_gym.rl.networks.BoundedMlpPolicy`` is also the
+  class SB3 stores in ``model.zip``, so the zoo builds exactly the network ``abb-gym train``
+  builds and the shipped agents keep loading.  The alternatives change the algorithm: SB3's
+  ``squash_output`` policy keyword is allowed only with gSDE and squashes the *sample*
+  (changing its log-probability), and an action ``env_wrapper`` bounds the applied action
+  but not the Gaussian mean, whose run-away beyond the clip is what BoundedMlpPolicy
+  prevents (see :mod:`abb_gym.rl.networks`).
+* ``policy_kwargs`` is the zoo's string (``activation_fn=nn.Tanh``): the zoo evaluates a
+  string with ``torch.nn`` in scope but passes a mapping on unchanged, where
+  ``activation_fn: Tanh`` would reach torch as a string.
+
+:func:`zoo_problems` checks a file against these rules without rl_zoo3 (the shipped configs
+are checked by the tests; ``tests/test_rl_zoo.py`` also trains each one with rl_zoo3 when it
+is installed).
+
+The first-wave format, still read (the shipped agents' ``agents/trained/*/config.yml`` use it
+and are fingerprinted): the ``_abb_gym`` keys under the id, ``policy: BoundedMlpPolicy`` and
+``policy_kwargs`` as a mapping with ``activation_fn: Tanh``.  rl_zoo3 cannot read such a file;
+``abb-gym train`` reads it as the same :class:`TrainConfig` as the current file it came from
+(tested for every shipped agent) and writes the run's ``config.yml`` in the current format.
+``tensorboard_log`` is accepted only in ``_abb_gym``.
 
 The evaluation environment is ``{scene, preset: "test"}`` plus the *policy-relevant* fields of
 ``env_kwargs`` (:data:`POLICY_FIELDS`: what changes the observation or the meaning of an
 action), then ``eval_env_kwargs``; reward weights and randomisation ranges of the training
-environment are not carried over, so shaping the reward never changes the test.
+environment are not carried over, so shaping the reward never changes the test.  (rl_zoo3's
+own evaluation uses the training ``env_kwargs`` unless ``--eval-env-kwargs`` is given.)
 """
 from __future__ import annotations
 
@@ -61,7 +101,8 @@ from ..configuration import (ConfigError, check, declare, fields_table, locate,
 
 __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
-           "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION"]
+           "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
+           "zoo_problems", "TrainConfigError"]
 
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
@@ -69,6 +110,21 @@ POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
                  "vibration_filter_time", "dwell")
 ENV_KEYWORDS = ("scene", "preset", "observe_balls")
 ABB_GYM_SECTION = "_abb_gym"
+#: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
+ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
+                "checkpoint_freq", "bootstrap_truncated", "tensorboard_log")
+#: of those, the ones a first-wave file holds under the environment id (still read)
+LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k != "tensorboard_log")
+#: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
+SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
+#: keys rl_zoo3 consumes itself under the id (``ExperimentManager._preprocess_hyperparams``);
+#: every other key goes to ``PPO(...)``
+ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "env_kwargs", "policy", "policy_kwargs",
+            "frame_stack", "monitor_kwargs", "env_wrapper", "vec_env_wrapper", "callback")
+#: PPO keywords rl_zoo3 sets from its command line: under the id PPO would get them twice
+ZOO_OWN_KEYWORDS = ("env", "tensorboard_log", "seed", "verbose", "device")
+#: SB3's names for its own PPO policies (``PPO.policy_aliases``)
+SB3_POLICY_ALIASES = ("MlpPolicy", "CnnPolicy", "MultiInputPolicy")
 POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
                 "BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
                 "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy"}
@@ -104,6 +160,8 @@ def linear_schedule(start: float):
 
 
 def _schedule(key: str, value: Any):
+    if key == "clip_range_vf" and value is None:  # PPO's default: no value clipping
+        return None
     if isinstance(value, str) and value.startswith("lin_"):
         start = check("", key, value[4:], declare(gt=0.0).metadata["spec"], TrainConfigError)
         return linear_schedule(start)
@@ -173,7 +231,8 @@ class TrainConfig:
     n_timesteps: int = declare(500_000, kind="integer", ge=1, le=10**11,
                                doc="environment steps, all sub-environments together")
     policy: str = declare("MlpPolicy", kind="choice", choices=tuple(POLICY_NAMES),
-                          doc="MlpPolicy or abb_gym.rl.networks.BoundedMlpPolicy")
+                          doc="MlpPolicy or abb_gym.rl.networks.BoundedMlpPolicy "
+                              "(BoundedMlpPolicy: the first-wave name)")
     normalize: dict[str, Any] | None = declare(kind="any",
                                                factory=lambda: {"norm_obs": True,
                                                                 "norm_reward": True},
@@ -198,13 +257,16 @@ class TrainConfig:
     bootstrap_truncated: bool = declare(True, kind="flag",
                                         doc="_abb_gym: report truncations as "
                                             "TimeLimit.truncated")
+    tensorboard_log: str | None = declare(None, kind="text", nullable=True,
+                                          doc="_abb_gym: folder of TensorBoard event files "
+                                              "(null: none)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
     def from_mapping(cls, env_id: str, raw: Mapping[str, Any], source: str = "",
                      extra: Mapping[str, Any] | None = None) -> "TrainConfig":
         """A config from the entry of ``env_id`` (zoo keys and PPO keywords) and the
-        ``_abb_gym`` settings ``extra``."""
+        ``_abb_gym`` settings ``extra`` (first-wave files hold them in the entry)."""
         where = f"{source or 'PPO config'} [{env_id}]"
         if env_id not in gym.registry:
             import abb_gym  # noqa: F401  (registers the ids)
@@ -217,7 +279,23 @@ class TrainConfig:
         if extra is not None and not isinstance(extra, Mapping):
             raise TrainConfigError(f"{where}: {ABB_GYM_SECTION} must be a mapping (got "
                                    f"{extra!r})")
-        raw = {**copy.deepcopy(dict(raw)), **copy.deepcopy(dict(extra or {}))}
+        raw = copy.deepcopy(dict(raw))
+        extra = copy.deepcopy(dict(extra or {}))
+        if "tensorboard_log" in raw:
+            raise TrainConfigError(f"{where}: field 'tensorboard_log' belongs in the "
+                                   f"{ABB_GYM_SECTION} section, not under the environment id "
+                                   f"(rl_zoo3 passes its own tensorboard_log to PPO)")
+        stray = sorted(set(extra) - set(ABB_GYM_KEYS))
+        if stray:
+            raise TrainConfigError(f"{where}: unknown key(s) {stray} in {ABB_GYM_SECTION}; "
+                                   f"allowed: {list(ABB_GYM_KEYS)} (hyperparameters go under "
+                                   f"the environment id)")
+        twice = sorted(set(raw) & set(extra))
+        if twice:
+            raise TrainConfigError(f"{where}: key(s) {twice} given both under the environment "
+                                   f"id and in {ABB_GYM_SECTION}; keep the {ABB_GYM_SECTION} "
+                                   f"one")
+        raw.update(extra)
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
         ppo_keys = _ppo_keywords()
@@ -238,31 +316,32 @@ class TrainConfig:
                     raise TrainConfigError(f"{where}: field {key!r} must be a mapping (got "
                                            f"{v!r})")
                 v = dict(v)
+            elif key == "tensorboard_log":
+                # SB3 would only fail when training starts, after the environments are built
+                if v is not None and (not isinstance(v, str) or not v):
+                    raise TrainConfigError(f"{where}: field 'tensorboard_log' must be a "
+                                           f"folder path or null (got {v!r})")
             else:
                 v = check(where, key, v, table[key], TrainConfigError)
             values[key] = v
         if "policy" in values:
             values["policy"] = POLICY_NAMES[values["policy"]]
-        tb = raw.get("tensorboard_log")
-        if tb is not None and (not isinstance(tb, str) or not tb):
-            # SB3 would only fail when training starts, after the environments are built
-            raise TrainConfigError(f"{where}: field 'tensorboard_log' must be a folder path "
-                                   f"or null (got {tb!r})")
-        for key in ("learning_rate", "clip_range"):
+        for key in SCHEDULE_KEYS:
             if key in raw:
                 _schedule(key, raw[key])
         return cls(env_id=env_id, hyperparams=raw, source=str(source), **values)
 
     def with_overrides(self, **changes: Any) -> "TrainConfig":
-        """A copy with top-level keys or PPO hyperparameters replaced (validated again)."""
-        raw = self.to_mapping()
-        raw.update(self.abb_gym_settings())
+        """A copy with keys of the entry (PPO hyperparameters included) or of ``_abb_gym``
+        replaced (validated again; ``env_kwargs`` and ``eval_env_kwargs`` are merged)."""
+        entry, settings = self.to_mapping(), self.abb_gym_settings()
         for key, value in changes.items():
+            target = settings if key in ABB_GYM_KEYS else entry
             if key in ("env_kwargs", "eval_env_kwargs") and isinstance(value, Mapping):
-                raw[key] = {**raw.get(key, {}), **value}
+                target[key] = {**target.get(key, {}), **value}
             else:
-                raw[key] = value
-        return TrainConfig.from_mapping(self.env_id, raw, self.source)
+                target[key] = value
+        return TrainConfig.from_mapping(self.env_id, entry, self.source, settings)
 
     def to_mapping(self) -> dict[str, Any]:
         """The zoo-compatible entry of this config (what ``config.yml`` stores under the id)."""
@@ -278,10 +357,13 @@ class TrainConfig:
 
     def abb_gym_settings(self) -> dict[str, Any]:
         """The ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know."""
-        return {"eval_env_kwargs": copy.deepcopy(self.eval_env_kwargs),
-                "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
-                "eval_seed": self.eval_seed, "checkpoint_freq": self.checkpoint_freq,
-                "bootstrap_truncated": self.bootstrap_truncated}
+        out = {"eval_env_kwargs": copy.deepcopy(self.eval_env_kwargs),
+               "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
+               "eval_seed": self.eval_seed, "checkpoint_freq": self.checkpoint_freq,
+               "bootstrap_truncated": self.bootstrap_truncated}
+        if self.tensorboard_log is not None:
+            out["tensorboard_log"] = self.tensorboard_log
+        return out
 
     def to_file_data(self) -> dict[str, Any]:
         """The whole file: the zoo entry under the id and the ``_abb_gym`` section."""
@@ -290,10 +372,12 @@ class TrainConfig:
     def ppo_kwargs(self) -> dict[str, Any]:
         """Keyword arguments for ``PPO(...)`` (schedules and activation functions resolved)."""
         kw = dict(self.hyperparams)
-        for key in ("learning_rate", "clip_range"):
+        for key in SCHEDULE_KEYS:
             if key in kw:
                 kw[key] = _schedule(key, kw[key])
         kw["policy_kwargs"] = resolve_policy_kwargs(self.policy_kwargs)
+        if self.tensorboard_log is not None:
+            kw["tensorboard_log"] = self.tensorboard_log
         return kw
 
 
@@ -320,6 +404,107 @@ def load_config(name_or_path: str | os.PathLike, env_id: str | None = None) -> T
         raise TrainConfigError(f"PPO config {str(path)!r} has no entry for {env_id!r}; it has "
                                f"{sorted(data)}")
     return TrainConfig.from_mapping(env_id, data[env_id], str(path), extra)
+
+
+def zoo_problems(config: str | os.PathLike | Mapping[str, Any],
+                 env_id: str | None = None) -> list[str]:
+    """What keeps rl_zoo3 (``python -m rl_zoo3.train --algo ppo -conf FILE``) from training a
+    config file unchanged: one line per problem, naming the id and the key; empty if none.
+
+    ``config`` is a file (path or name on the search path) or its parsed content; ``env_id``
+    None checks every environment id in it.  The rules are those of rl_zoo3's
+    ``ExperimentManager`` (see the module docstring); the file must also be a valid
+    ``abb-gym train`` config (:func:`load_config`), which this does not check."""
+    if isinstance(config, Mapping):
+        data = config
+    else:
+        data = read_yaml(config_path(config), "PPO config", TrainConfigError)
+    ids = [k for k in data if not str(k).startswith("_")]
+    if env_id is not None:
+        if env_id not in data:
+            return [f"{env_id}: no entry for this environment id (rl_zoo3 reads only the "
+                    f"entry of --env)"]
+        ids = [env_id]
+    if not ids:
+        return ["the file has no environment id entry (rl_zoo3 reads only the entry of "
+                "--env)"]
+    out: list[str] = []
+    for key in ids:
+        out += [f"{key}: {p}" for p in _zoo_entry_problems(data[key])]
+    return out
+
+
+def _zoo_entry_problems(entry: Any) -> list[str]:
+    if not isinstance(entry, Mapping):
+        return [f"the entry must be a mapping of hyperparameters (got {entry!r})"]
+    problems = []
+    for key in ("n_timesteps", "policy"):
+        if key not in entry:
+            problems.append(f"{key!r} is missing (rl_zoo3 needs it; abb-gym train has a "
+                            f"default)")
+    policy = entry.get("policy", "MlpPolicy")
+    if not isinstance(policy, str):
+        problems.append(f"'policy' must be a policy name or an import path (got {policy!r})")
+    elif "." in policy:
+        import importlib
+        module, _, name = policy.rpartition(".")
+        try:
+            found = getattr(importlib.import_module(module), name, None)
+        except ImportError as exc:
+            found, why = None, f" ({exc})"
+        else:
+            why = ""
+        if not isinstance(found, type):
+            problems.append(f"'policy': rl_zoo3 cannot import the class {policy!r}{why}")
+    elif policy not in SB3_POLICY_ALIASES:
+        hint = (f"; rl_zoo3 imports a custom policy by its import path: "
+                f"{POLICY_NAMES[policy]}" if policy in POLICY_NAMES else "")
+        problems.append(f"'policy': {policy!r} is not an SB3 PPO policy name "
+                        f"{list(SB3_POLICY_ALIASES)}{hint}")
+    kwargs = entry.get("policy_kwargs")
+    if isinstance(kwargs, str):
+        try:
+            parse_python_literal(kwargs, {"nn": _torch_nn()}, "policy_kwargs", TrainConfigError)
+        except TrainConfigError as exc:
+            problems.append(str(exc))
+    elif isinstance(kwargs, Mapping):
+        for k, v in kwargs.items():
+            if isinstance(v, str) and str(k).endswith(("_fn", "_class")):
+                problems.append(f"'policy_kwargs.{k}' is the string {v!r} in a mapping, which "
+                                f"rl_zoo3 passes to the policy as it is; write policy_kwargs "
+                                f"as the zoo's string, e.g. \"dict(..., {k}=nn.{v})\"")
+    elif kwargs is not None:
+        problems.append(f"'policy_kwargs' must be a zoo string \"dict(...)\" or a mapping "
+                        f"(got {kwargs!r})")
+    norm = entry.get("normalize", False)
+    if isinstance(norm, str):
+        try:
+            parse_python_literal(norm, {}, "normalize", TrainConfigError)
+        except TrainConfigError as exc:
+            problems.append(str(exc))
+    elif not isinstance(norm, (bool, Mapping)):
+        problems.append(f"'normalize' must be true, false, a mapping or a zoo string (got "
+                        f"{norm!r})")
+    for key in SCHEDULE_KEYS:
+        v = entry.get(key)
+        if isinstance(v, str) and not (v.startswith("lin_") and v.count("_") == 1):
+            problems.append(f"{key!r}: rl_zoo3 reads a string only as lin_<start> (got {v!r})")
+    env_kwargs = entry.get("env_kwargs")
+    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
+        problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
+    ppo_keys = _ppo_keywords()
+    for key in entry:
+        if key in LEGACY_ENTRY_KEYS or key == "tensorboard_log":
+            why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"
+                   else "rl_zoo3 passes it to PPO, which does not know it")
+            problems.append(f"{key!r} under the environment id: {why}; move it to the "
+                            f"{ABB_GYM_SECTION} section")
+        elif key in ZOO_OWN_KEYWORDS:
+            problems.append(f"{key!r} under the environment id: rl_zoo3 sets it from its "
+                            f"command line")
+        elif key not in ZOO_KEYS and key not in ppo_keys:
+            problems.append(f"{key!r} is neither an rl_zoo3 key nor a PPO keyword")
+    return problems
 
 
 def eval_env_kwargs(cfg: TrainConfig) -> dict[str, Any]:

@@ -35,7 +35,7 @@ file                       content
 ``checkpoints/``           ``ppo_<steps>_steps.zip`` and ``ppo_vecnormalize_<steps>_steps.pkl``
 =========================  ==================================================================
 
-With ``tensorboard_log`` (:func:`train`'s argument or the config's PPO keyword), SB3 also
+With ``tensorboard_log`` (:func:`train`'s argument or the config's ``_abb_gym`` key), SB3 also
 writes TensorBoard event files there, one run ``<config>_s<seed>_<n>`` per training: the
 ``train/`` losses, the ``rollout/`` episode returns and lengths, and the ``eval/`` test-set
 means of every evaluation (``tensorboard --logdir DIR``).
