@@ -4,7 +4,7 @@ folder).  ``baseline:NAME`` policies use a ``baselines/<scene>.yaml`` of a confi
 (``--configs DIR`` or ``$ABB_GYM_CONFIGS``) before the shipped one, so::
 
     abb-gym tune-baselines --scene yoshida_odd --out my_configs/baselines
-    abb-gym evaluate --configs my_configs --scene yoshida_odd --policy baseline:speed_dwell
+    abb-gym --configs my_configs evaluate --scene yoshida_odd --policy baseline:speed_dwell
 
 An existing file is replaced only with ``--force``.
 """
