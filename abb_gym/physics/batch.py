@@ -173,6 +173,10 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
     h = f[F_H]
     tc = f[F_TC]
     tt = f[F_TT]
+    sync = False
+    for l in range(L):
+        if g[G_ON, l] != 0 and f[W_SYNC, l] != 0.0:
+            sync = True
     while True:
         running = False
         for l in range(L):
@@ -234,11 +238,15 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             r = math.sqrt(x * x + y * y)
             if r > f[W_MAX, l]:
                 f[W_MAX, l] = r
-            if f[W_SYNC, l] != 0.0:
-                ux, uy = sensors.demodulate(dx, dy, s[2, l] - f[W_MARK, l])
-                a = f[W_GAIN, l]
-                f[W_ZX, l] += a * (ux - f[W_ZX, l])
-                f[W_ZY, l] += a * (uy - f[W_ZY, l])
+        if sync:
+            # a loop of its own, free of early exits, so that it vectorises across the lanes
+            for l in range(L):
+                if act[l] != 0 and g[G_STATUS, l] == integ.STATUS_OK and f[W_SYNC, l] != 0.0:
+                    ux, uy = sensors.demodulate(s[0, l] - f[W_XS, l], s[1, l] - f[W_YS, l],
+                                                s[2, l] - f[W_MARK, l])
+                    a = f[W_GAIN, l]
+                    f[W_ZX, l] += a * (ux - f[W_ZX, l])
+                    f[W_ZY, l] += a * (uy - f[W_ZY, l])
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
