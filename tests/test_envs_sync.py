@@ -212,3 +212,16 @@ def test_check_env_with_sync_observation_and_frame_stack(env_id):
         warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
         check_env(env.unwrapped)
     env.close()
+
+
+def test_sync_and_frame_stack_survive_pickling():
+    import pickle
+    env = gym.make(SPEED, preset="varied", frame_stack=3)
+    env.reset(seed=1)
+    for _ in range(5):
+        env.step(np.array([0.8], np.float32))
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(5):
+        a = env.step(np.array([0.8], np.float32))
+        b = clone.step(np.array([0.8], np.float32))
+        assert np.array_equal(a[0], b[0]) and a[1] == b[1]
