@@ -8,7 +8,9 @@ import pytest
 import abb_gym
 from abb_gym.envs import episodes
 from abb_gym.envs.setup import EnvSetup
+from abb_gym.envs.layout import S_AOP, S_AREF
 from abb_gym.physics import model as mdl
+from abb_gym.physics import rotor
 from abb_gym.physics.simulate import default_step
 
 
@@ -67,6 +69,29 @@ def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
     for r in range(n):
         ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r])
         assert steps[r] == default_step(ep_scene, setup.max_speed, "rk4")
+    # machines of another load (critical speed) and support damping: the same, bit for bit,
+    # and what a reset writes (step, reference length, reward scales, rest position)
+    crit = rng.uniform(0.9, 1.1, n)
+    crit[2] = 1.0  # the nominal mass and imbalance: the nominal eccentricity
+    crit[6] = 1.0
+    damp = rng.uniform(0.5, 2.0, n)
+    damp[0] = 1.0
+    p, b = episodes.packed_rows(sc, imbalance, drag, roll, crit, damp)
+    table = episodes.EpisodeTable(sc, n)
+    pending = episodes.prepare(setup, table, np.arange(n), imbalance, np.zeros(n),
+                               np.zeros((n, sc.ball_count)), drag, roll, crit, damp)
+    for r in range(n):
+        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r], crit[r], damp[r])
+        p_ref, b_ref = mdl.pack_parameters(ep_scene)
+        assert np.array_equal(p[r], p_ref), r
+        assert np.array_equal(b[r], b_ref), r
+        assert np.array_equal(pending.p[r], p_ref), r
+        assert pending.step[r] == default_step(ep_scene, setup.max_speed, "rk4"), r
+        assert pending.reference_length[r] == ep_scene.reference_length, r
+        assert tuple(pending.static_deflection[r]) == rotor.static_deflection(ep_scene), r
+        scale = rotor.imbalance_scale(ep_scene)
+        assert (pending.st[r, S_AREF], pending.st[r, S_AOP]) == rotor.reference_amplitudes(
+            ep_scene, setup.operating_speed, scale), r
 
 
 def test_reset_options_are_checked_by_name():
@@ -78,3 +103,7 @@ def test_reset_options_are_checked_by_name():
         episodes.draw(setup, rng, {"ball_drag_scale": 0.0})
     with pytest.raises(ValueError, match="'ball_angles' must be 2 finite"):
         episodes.draw(setup, rng, {"ball_angles": [0.0, np.nan]})
+    with pytest.raises(ValueError, match="'critical_speed_scale' must be > 0"):
+        episodes.draw(setup, rng, {"critical_speed_scale": -1.0})
+    with pytest.raises(ValueError, match="'support_damping_scale' must be a number"):
+        episodes.draw(setup, rng, {"support_damping_scale": "high"})

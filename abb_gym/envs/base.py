@@ -41,13 +41,30 @@ COMMON_DOC = textwrap.dedent(r"""
     | 3 | vibration_amplitude | filtered whirl radius / A_v | [0, c/A_v] |
     | 4 | time_fraction | t / episode_length | [0, 1] |
     | 5 .. 4+A | last_action | the last action after clipping | [-1, 1] |
-    | 5+A .. | cos, sin(ball_angle[i]) | only with ``observe_balls=True`` | [-1, 1] |
+    | 5+A | sync_amplitude | synchronous (1x) vibration amplitude / A_v; only with ``sync_vibration.enabled`` | [0, c/A_v] |
+    | 6+A, 7+A | sync_cos, sync_sin | its phase from the rotor's reference mark | [-1, 1] |
+    | then | cos, sin(ball_angle[i]) | only with ``observe_balls=True`` | [-1, 1] |
 
     A is the action size (1; DwellProfile 3).  ``(x_rest, y_rest)`` is the rest position of
     the rotor centre: the origin, or the static sag under gravity (horizontal-axis scenes);
     the vibration radius is the distance from it (equal to the whirl radius without gravity).
     The vibration amplitude is the vibration radius passed through a first-order low-pass of
     time constant ``vibration_filter_time``.  Ball angles are measured from the imbalance.
+
+    **Synchronous vibration** (preset section ``sync_vibration``: ``enabled``, ``lag`` [s],
+    ``noise`` [x A_v]; off in ``train``/``test``/``nominal``, on in ``varied``/``varied_test``):
+    what a balancing machine or a drive with a once-per-revolution reference reads.  The
+    vibration ``(x - x_rest) + i (y - y_rest)`` is demodulated against the angle of the
+    rotor's reference mark and low-passed with time constant ``lag`` at every integration step
+    (:mod:`abb_gym.physics.sensors`, which derives it); the read-out ``Z`` plus Gaussian noise
+    of standard deviation ``noise * A_v`` per component gives ``sync_amplitude = |Z| / A_v``
+    and ``(sync_cos, sync_sin) = Z / |Z|`` ((0, 0) while ``Z = 0``, at rest without noise).
+    The mark is where the rotor's x axis pointed at t = 0, so the primary imbalance lies at
+    ``imbalance_phase`` from it (unobserved, random per episode).  At constant speed with the
+    balls still, ``|Z|`` is the steady whirl radius and ``arg Z`` the direction of the residual
+    imbalance from the mark minus the support's phase lag (about 0 below the critical speed,
+    180 deg above): where the balls stand.  ``frame_stack: k`` returns the last k
+    observations, oldest first, as one flat vector (:mod:`abb_gym.envs.config`).
 
     ## Rewards
 
@@ -65,8 +82,8 @@ COMMON_DOC = textwrap.dedent(r"""
     | failure | terminal: -(w_failure + R_max * (T_episode - t) / T_ref + w_residual * c / A_op) |
 
     * ``r_mean``: the vibration radius averaged over the interval's RK4 steps.
-    * ``A_peak``, ``A_op``: the same machine with its balancer off (the total mass ``M``, the
-      scene's support, this episode's imbalance U; :func:`abb_gym.physics.rotor.
+    * ``A_peak``, ``A_op``: the same machine with its balancer off (this episode's total mass
+      ``M`` and support, this episode's imbalance U; :func:`abb_gym.physics.rotor.
       reference_amplitudes`): the steady Jeffcott amplitude ``U w^2 / sqrt((k - M w^2)^2 +
       (c w)^2)`` (larger of the two axes), at its peak over [0, w_op] and at w_op.  A residual
       ratio of 1 is no better than without a balancer.  U is floored at a tenth of the
@@ -95,10 +112,13 @@ COMMON_DOC = textwrap.dedent(r"""
     x = M g_x / k_x, y = M g_y / k_y), all speeds 0.  The rotor angle is the
     imbalance phase, the balls sit at their initial angles (measured from the imbalance).  The
     imbalance magnitude and phase, ball angles, race drag and rolling resistance are drawn from
-    the preset's ``randomize`` ranges with ``self.np_random``; ``reset(options=...)`` sets exact
-    values: ``imbalance`` [kg m] or ``imbalance_ratio`` (x balancing capacity),
-    ``imbalance_phase`` [rad], ``ball_angles`` [rad], ``ball_drag_scale``,
-    ``rolling_resistance_scale``.
+    the preset's ``randomize`` ranges with ``self.np_random``, and so (where the preset
+    randomises them, ``varied``) are the critical speed, through the supported mass
+    (``critical_speed_scale`` s: M / s^2, :mod:`abb_gym.envs.config`), and the support damping;
+    ``reset(options=...)`` sets exact values: ``imbalance`` [kg m] or ``imbalance_ratio``
+    (x balancing capacity), ``imbalance_phase`` [rad], ``ball_angles`` [rad],
+    ``ball_drag_scale``, ``rolling_resistance_scale``, ``critical_speed_scale``,
+    ``support_damping_scale``.  Under gravity the rest position is the episode's own sag.
 
     ## Episode End
 
@@ -150,8 +170,8 @@ COMMON_DOC = textwrap.dedent(r"""
 
     At reset, ``info`` also holds the episode's parameters (``imbalance``, ``imbalance_phase``,
     ``initial_ball_angles``, ``ball_drag_scale``, ``rolling_resistance_scale``,
-    ``integration_step``, ``static_deflection``); ``env.unwrapped.episode_scene`` is the
-    episode as a Scene.
+    ``critical_speed_scale``, ``support_damping_scale``, ``integration_step``,
+    ``static_deflection``); ``env.unwrapped.episode_scene`` is the episode as a Scene.
 
     ## Arguments
 
@@ -159,7 +179,9 @@ COMMON_DOC = textwrap.dedent(r"""
     ``configs/envs``, path, dict or EnvConfig; default "train"), ``observe_balls`` (False),
     ``render_mode`` (None, "rgb_array", "human"), ``max_episode_steps`` (backstop, None),
     ``record_history`` (False: keep a per-interval history, :meth:`history`), ``info_level``
-    ("lean" or "full", above), and any preset field as a keyword (``control_interval=0.02``, ``reward={"time": 2.0}``, ...).
+    ("lean" or "full", above), and any preset field as a keyword (``control_interval=0.02``,
+    ``reward={"time": 2.0}``, ``sync_vibration={"enabled": True, "noise": 0.002}``,
+    ``frame_stack=4``, ...).
 
     ## Bad input
 
@@ -220,7 +242,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         self._args = bf.kernel_args()
         self._step_fn = None  # the compiled step, fetched at the first step
         self._act_row = bf.act[0]
-        self._obs_row = bf.obs[0]
+        self._obs_row = bf.observations[0]
         self._out_row = bf.out[0]
         self._st_row = bf.st[0]
         self._s_row = bf.s[0]
@@ -319,6 +341,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         if step is None:
             step = self._step_fn = self._bufs.step_function()
         step(*self._args)
+        self._bufs.push_frames()
         out = self._out_row
         flag = out[O_ACTFLAG]
         if flag == ACT_NONFINITE:

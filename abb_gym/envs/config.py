@@ -10,6 +10,10 @@ train      default; randomised imbalance (inside the balancing capacity), phase,
            positions, race drag and rolling resistance
 test       evaluation; wider ranges, imbalance up to 1.3 x the balancing capacity
 nominal    no randomisation: the scene exactly as loaded (reproduces ``simulate``)
+varied     machines that differ in what decides the best run-up, unobserved: critical speed
+           +-30 % (load mass), imbalance, ball drag, rolling resistance, support damping;
+           the synchronous vibration is observed (``configs/envs/varied.yaml`` says why)
+varied_test  held-out evaluation of ``varied``: wider ranges, imbalance beyond the capacity
 =========  ================================================================================
 
 Fields (declared once on :class:`EnvConfig` and its sections; ``null`` where a
@@ -20,8 +24,25 @@ scene-derived default exists):
 A ``randomize`` entry is ``[lo, hi]`` (uniform, drawn from the environment's ``np_random``),
 one number (fixed), or ``null`` (the scene's value).  A preset may name a ``base`` preset whose
 fields it overrides.  Keyword arguments override any field; the nested sections ``reward``,
-``dwell`` and ``randomize`` are merged key by key (``randomize={"imbalance_ratio": None}``
-switches one entry off).  Errors name the field and the allowed range.
+``dwell``, ``randomize`` and ``sync_vibration`` are merged key by key
+(``randomize={"imbalance_ratio": None}`` switches one entry off,
+``sync_vibration={"enabled": True}`` adds the synchronous vibration to the observation).
+Errors name the field and the allowed range.
+
+**Critical speed.**  ``randomize.critical_speed_scale`` s scales the scene's critical speeds
+``sqrt(k / M)`` through the supported mass, as a load does (laundry in a drum, sample tubes in
+a centrifuge rotor): ``M' = M / s^2``, the difference carried by the rotor (its mass becomes
+``M' - sum m_i``, its polar inertia scales with that mass, a load spread like the rotor), the
+support unchanged.  The imbalance is drawn on its own (``imbalance_ratio``), so the load's
+eccentricity is ``U0 / rotor mass``.  s in [0.7, 1.3] means M' in [0.59, 2.04] M.  The preset
+is refused when a corner of the range leaves no rotor mass (s too large) or, under gravity,
+sags the rotor onto the housing clearance (s too small).
+
+**Frame stack.**  ``frame_stack: k`` (> 1) returns the last k observations, oldest first,
+concatenated into one flat ``Box`` of ``k x obs_dim`` (a policy with memory that SB3's
+``MlpPolicy`` takes as it is); at reset the first observation fills all k frames
+(gymnasium's ``FrameStackObservation`` with ``padding_type="reset"``, flattened).  It is done
+natively, so the single and the vector environment (autoreset included) stack alike.
 """
 from __future__ import annotations
 
@@ -34,7 +55,8 @@ from .. import resources
 from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
                              read_yaml, specs)
 
-__all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "load_preset",
+__all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "SyncVibration",
+           "load_preset",
            "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS"]
 
 Range = tuple[float, float]
@@ -96,9 +118,32 @@ class Randomization:
                                                      nullable=True,
                                                      doc="factor on the scene's "
                                                          "ball_rolling_resistance")
+    critical_speed_scale: Range | None = declare(None, kind="range", gt=0.0, le=10.0,
+                                                 nullable=True,
+                                                 doc="factor s on the critical speeds, through "
+                                                     "the supported mass M / s^2 (a load; "
+                                                     "module docstring)")
+    support_damping_scale: Range | None = declare(None, kind="range", ge=0.0, le=1e3,
+                                                  nullable=True,
+                                                  doc="factor on the scene's support damping "
+                                                      "(both axes)")
 
 
-_SECTIONS = {"reward": RewardWeights, "dwell": DwellRanges, "randomize": Randomization}
+@dataclass(frozen=True)
+class SyncVibration:
+    enabled: bool = declare(False, kind="flag",
+                            doc="observe the synchronous (1x) vibration: amplitude and phase "
+                                "from the rotor's reference mark (abb_gym.envs.base)")
+    lag: float = declare(0.1, unit="s", ge=0.0, le=100.0,
+                         doc="time constant of the tracking filter's low-pass (0: the "
+                             "demodulated sample at the interval end)")
+    noise: float = declare(0.0, ge=0.0, le=100.0,
+                           doc="read-out noise: standard deviation of each component of the "
+                               "measured vector / A_v (the vibration scale)")
+
+
+_SECTIONS = {"reward": RewardWeights, "dwell": DwellRanges, "randomize": Randomization,
+             "sync_vibration": SyncVibration}
 
 
 @dataclass(frozen=True)
@@ -136,6 +181,11 @@ class EnvConfig:
     dwell: DwellRanges = declare(DwellRanges(), kind="any", doc="DwellProfile action ranges")
     randomize: Randomization = declare(Randomization(), kind="any",
                                        doc="per-episode randomisation")
+    sync_vibration: SyncVibration = declare(SyncVibration(), kind="any",
+                                            doc="the synchronous vibration observation")
+    frame_stack: int = declare(1, kind="integer", ge=1, le=64,
+                               doc="observe the last k observations (module docstring); 1: "
+                                   "the current one only")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dictionary (YAML/JSON-safe; ranges as lists)."""

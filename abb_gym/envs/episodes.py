@@ -1,12 +1,17 @@
 """Episodes: what each environment draws, and the rows of many environments reset at once.
 
 An episode is the nominal scene with a drawn primary imbalance and phase, initial ball angles,
-and scaled ball drag and rolling resistance (the preset's ``randomize`` ranges), or the values
-given as reset options.
+scaled ball drag and rolling resistance, and, where a preset randomises them, a scaled critical
+speed (through the supported mass: :func:`loaded_rotor_mass`) and support damping (the
+preset's ``randomize`` ranges), or the values given as reset options.  With a noisy
+synchronous-vibration observation it also draws the key of its sensor noise
+(:mod:`abb_gym.physics.sensors`).
 
 * :func:`draw` takes one environment's values from its own generator in a fixed order, with
   one ``rng.random`` call (the numbers ``rng.uniform`` would give one by one: ``low + (high -
-  low) u``), then applies the reset options.
+  low) u``), then the noise key (``rng.integers``, only when the observation is noisy), then
+  applies the reset options.  A randomised parameter added later takes its number after the
+  existing ones, so presets that leave it off draw the same episodes as before.
 * :func:`prepare` computes what resetting many rows at once writes: the packed parameters,
   the initial state, the drive rows and the bookkeeping of the compiled step, with numpy over
   the rows plus one compiled call for the stiff rates that set each episode's integration
@@ -34,7 +39,9 @@ seconds of work per control interval) is refused with a ValueError that says wha
 (``integrator="etdrk4"``, which integrates the drag exactly at the ordinary step, or smaller
 scales): at reset for reset options, and when the environment is made for a preset whose
 ``randomize`` ranges allow such an episode, so that an automatic reset never fails.  An
-explicit ``integration_step`` is the user's choice and is not checked.
+explicit ``integration_step`` is the user's choice and is not checked.  The check takes the
+corners of every range the step depends on: drag, rolling resistance, critical speed (a lighter
+machine has a faster natural frequency) and support damping.
 """
 from __future__ import annotations
 
@@ -47,19 +54,20 @@ import numpy as np
 
 from ..physics import drive_law as dl
 from ..physics import model as mdl
-from ..physics import rotor, runup
-from ..physics.scene import Scene, reference_length
+from ..physics import rotor, runup, sensors
+from ..physics.scene import Scene, SceneError, reference_length
 from ..physics.simulate import default_step, stiff_rates
 from .config import PresetError
-from .layout import (N_ST, S_ACC, S_AOP, S_AREF, S_DTMAX, S_NSEG, S_PEN_RATE, S_PEN_TERM,
-                     S_UBEST, S_USCALE, S_XS, S_YS)
+from .layout import (N_ST, S_ACC, S_AOP, S_AREF, S_DTMAX, S_MARK, S_NKEY, S_NSEG,
+                     S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_XS, S_YS)
 
 __all__ = ["RESET_OPTIONS", "MAX_STIFFNESS", "Episode", "EpisodeTable", "Pending", "draw",
-           "prepare", "commit", "check_preset_stiffness", "reduce_angle",
-           "episode_scene", "packed_rows"]
+           "prepare", "commit", "check_preset_stiffness", "check_preset_machines",
+           "reduce_angle", "episode_scene", "packed_rows", "loaded_rotor_mass"]
 
 RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
-                 "ball_drag_scale", "rolling_resistance_scale")
+                 "ball_drag_scale", "rolling_resistance_scale", "critical_speed_scale",
+                 "support_damping_scale")
 
 # Largest ratio of the step an episode's rotation needs to the step its stiff rate forces on
 # RK4 (module docstring).  The shipped scenes and presets need at most 15 (washer's rolling
@@ -80,12 +88,44 @@ def reduce_angle(angle):
     return np.array([math.remainder(v, TWO_PI) for v in a.ravel()]).reshape(a.shape)
 
 
-def episode_scene(scene: Scene, imbalance: float, drag: float, roll: float) -> Scene:
+def loaded_rotor_mass(scene: Scene, critical_speed_scale):
+    """Rotor mass [kg] that scales the critical speeds ``sqrt(k / M)`` of ``scene`` by
+    ``critical_speed_scale`` s (a number or an array): the supported mass becomes ``M / s^2``
+    and the rotor (with its load) carries all of the change, ``M / s^2 - sum m_i``; exactly the
+    scene's rotor mass for s = 1."""
+    s = np.asarray(critical_speed_scale, float)
+    loaded = scene.total_mass / (s * s) - float(sum(scene.ball_mass))
+    out = np.where(s == 1.0, scene.rotor_mass, loaded)
+    return float(out) if out.ndim == 0 else out
+
+
+def _polar_inertia(scene: Scene, rotor_mass):
+    """The loaded rotor's polar inertia [kg m^2]: proportional to its mass (a load spread like
+    the rotor), exactly the scene's at the scene's mass."""
+    m = np.asarray(rotor_mass, float)
+    out = np.where(m == scene.rotor_mass, scene.rotor_polar_inertia,
+                   scene.rotor_polar_inertia * (m / scene.rotor_mass))
+    return float(out) if out.ndim == 0 else out
+
+
+def episode_scene(scene: Scene, imbalance: float, drag: float, roll: float,
+                  critical_speed_scale: float = 1.0, damping_scale: float = 1.0) -> Scene:
     """The nominal ``scene`` with primary imbalance ``imbalance`` [kg m] (through the rotor
-    eccentricity) and ball drag and rolling resistance scaled by ``drag`` and ``roll``."""
+    eccentricity), ball drag and rolling resistance scaled by ``drag`` and ``roll``, critical
+    speeds scaled by ``critical_speed_scale`` (through the rotor mass,
+    :func:`loaded_rotor_mass`; its polar inertia in proportion) and support damping by
+    ``damping_scale``."""
     changes: dict[str, Any] = {}
-    if imbalance != scene.imbalance:
-        changes["rotor_eccentricity"] = imbalance / scene.rotor_mass
+    mass = scene.rotor_mass
+    if critical_speed_scale != 1.0:
+        mass = loaded_rotor_mass(scene, critical_speed_scale)
+        changes["rotor_mass"] = mass
+        changes["rotor_polar_inertia"] = _polar_inertia(scene, mass)
+    if imbalance != scene.imbalance or mass != scene.rotor_mass:
+        changes["rotor_eccentricity"] = imbalance / mass
+    if damping_scale != 1.0:
+        changes["support_damping_x"] = scene.support_damping_x * damping_scale
+        changes["support_damping_y"] = scene.support_damping_y * damping_scale
     if drag != 1.0:
         changes["ball_drag"] = [v * drag for v in scene.ball_drag]
     if roll != 1.0:
@@ -96,8 +136,9 @@ def episode_scene(scene: Scene, imbalance: float, drag: float, roll: float) -> S
 @dataclass
 class Episode:
     """Parameters of one episode: imbalance [kg m] and its phase [rad], initial ball angles
-    [rad], ball drag and rolling-resistance scales [-], the integration step bound [s] and the
-    rotor's rest position (static sag) [m]."""
+    [rad], ball drag and rolling-resistance scales [-], the integration step bound [s], the
+    rotor's rest position (static sag) [m], the critical-speed and support-damping scales [-]
+    and the key of the sensor noise."""
 
     nominal: Scene
     imbalance: float
@@ -107,18 +148,24 @@ class Episode:
     rolling_resistance_scale: float
     integration_step: float
     static_deflection: tuple[float, float] = (0.0, 0.0)
+    critical_speed_scale: float = 1.0
+    support_damping_scale: float = 1.0
+    noise_key: int = 0
 
     @cached_property
     def scene(self) -> Scene:
         """The episode as a Scene (built on first use)."""
         return episode_scene(self.nominal, self.imbalance, self.ball_drag_scale,
-                             self.rolling_resistance_scale)
+                             self.rolling_resistance_scale, self.critical_speed_scale,
+                             self.support_damping_scale)
 
     def as_info(self) -> dict[str, Any]:
         return {"imbalance": self.imbalance, "imbalance_phase": self.imbalance_phase,
                 "initial_ball_angles": self.ball_angles.copy(),
                 "ball_drag_scale": self.ball_drag_scale,
                 "rolling_resistance_scale": self.rolling_resistance_scale,
+                "critical_speed_scale": self.critical_speed_scale,
+                "support_damping_scale": self.support_damping_scale,
                 "integration_step": self.integration_step,
                 "static_deflection": np.array(self.static_deflection)}
 
@@ -135,9 +182,12 @@ class EpisodeTable:
         self.ball_angles = np.zeros((n, nb))
         self.ball_drag_scale = np.ones(n)
         self.rolling_resistance_scale = np.ones(n)
+        self.critical_speed_scale = np.ones(n)
+        self.support_damping_scale = np.ones(n)
+        self.noise_key = np.zeros(n, dtype=np.int64)
         self.integration_step = np.zeros(n)
         self.reference_length = np.full(n, scene.reference_length)
-        self.static_deflection = rotor.static_deflection(scene)
+        self.static_deflection = np.tile(np.array(rotor.static_deflection(scene)), (n, 1))
 
     def episode(self, i: int) -> Episode | None:
         """Row ``i``'s episode (None before its first reset)."""
@@ -146,7 +196,10 @@ class EpisodeTable:
         return Episode(self.scene, float(self.imbalance[i]), float(self.imbalance_phase[i]),
                        self.ball_angles[i].copy(), float(self.ball_drag_scale[i]),
                        float(self.rolling_resistance_scale[i]), float(self.integration_step[i]),
-                       self.static_deflection)
+                       (float(self.static_deflection[i, 0]),
+                        float(self.static_deflection[i, 1])),
+                       float(self.critical_speed_scale[i]), float(self.support_damping_scale[i]),
+                       int(self.noise_key[i]))
 
     def info(self, rows) -> dict[str, np.ndarray]:
         """The episode parameters of ``rows`` as arrays over all rows (0 elsewhere): the keys
@@ -159,12 +212,14 @@ class EpisodeTable:
                             ("initial_ball_angles", self.ball_angles),
                             ("ball_drag_scale", self.ball_drag_scale),
                             ("rolling_resistance_scale", self.rolling_resistance_scale),
+                            ("critical_speed_scale", self.critical_speed_scale),
+                            ("support_damping_scale", self.support_damping_scale),
                             ("integration_step", self.integration_step)):
             arr = np.zeros_like(values)
             arr[rows] = values[rows]
             out[key] = arr
         sag = np.zeros((n, 2))
-        sag[rows] = self.static_deflection
+        sag[rows] = self.static_deflection[rows]
         out["static_deflection"] = sag
         return out
 
@@ -204,11 +259,13 @@ def _uniform(lo_hi: Sequence[float], u):
 
 
 def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
-         ) -> tuple[float, float, np.ndarray, float, float]:
+         ) -> tuple[float, float, np.ndarray, float, float, float, float, int]:
     """One environment's episode values ``(imbalance, phase, ball angles, drag scale, rolling
-    resistance scale)``: the preset's random draws from ``rng`` (imbalance ratio, phase, ball
-    angles, drag scale, rolling-resistance scale: those that are randomised, in this order),
-    then ``options`` (:data:`RESET_OPTIONS`) in their place."""
+    resistance scale, critical-speed scale, support-damping scale, noise key)``: the preset's
+    random draws from ``rng`` (imbalance ratio, phase, ball angles, drag scale,
+    rolling-resistance scale, critical-speed scale, support-damping scale: those that are
+    randomised, in this order; then the noise key if the observation is noisy), then
+    ``options`` (:data:`RESET_OPTIONS`) in their place."""
     sc = setup.scene
     rz = setup.config.randomize
     nb = sc.ball_count
@@ -218,8 +275,12 @@ def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
     angles = np.asarray(sc.ball_angles0, dtype=float).copy()
     drag = 1.0
     roll = 1.0
+    crit = 1.0
+    damp = 1.0
+    key = 0
     count = sum(1 for r in (rz.imbalance_ratio, rz.imbalance_phase, rz.ball_drag_scale,
-                            rz.rolling_resistance_scale) if r is not None)
+                            rz.rolling_resistance_scale, rz.critical_speed_scale,
+                            rz.support_damping_scale) if r is not None)
     count += nb if rz.ball_angles is not None else 0
     if count:
         u = rng.random(count)
@@ -238,6 +299,15 @@ def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
             k += 1
         if rz.rolling_resistance_scale is not None:
             roll = float(_uniform(rz.rolling_resistance_scale, u[k]))
+            k += 1
+        if rz.critical_speed_scale is not None:
+            crit = float(_uniform(rz.critical_speed_scale, u[k]))
+            k += 1
+        if rz.support_damping_scale is not None:
+            damp = float(_uniform(rz.support_damping_scale, u[k]))
+    sync = setup.config.sync_vibration
+    if sync.enabled and sync.noise > 0.0:
+        key = int(rng.integers(0, sensors.KEY_BOUND))
     if options is not None and not isinstance(options, Mapping):
         raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)} (got "
                          f"{_show(options)})")
@@ -275,28 +345,85 @@ def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
         if "rolling_resistance_scale" in options:
             roll = _opt_number("rolling_resistance_scale", options["rolling_resistance_scale"],
                                0.0, "-")
+        if "critical_speed_scale" in options:
+            crit = _opt_number("critical_speed_scale", options["critical_speed_scale"], 0.0,
+                               "-", inclusive=False)
+            _check_machine(sc, crit, "reset option 'critical_speed_scale'", ValueError)
+        if "support_damping_scale" in options:
+            damp = _opt_number("support_damping_scale", options["support_damping_scale"], 0.0,
+                               "-")
+            _check_machine(sc, crit, "reset option 'support_damping_scale'", ValueError,
+                           damp)
     # angles far beyond 2 pi: the same machine as their remainder (module docstring)
-    return float(imbalance), reduce_angle(phase), reduce_angle(angles), float(drag), float(roll)
+    return (float(imbalance), reduce_angle(phase), reduce_angle(angles), float(drag),
+            float(roll), float(crit), float(damp), key)
 
 
-def rotor_eccentricity(scene: Scene, imbalance: np.ndarray) -> np.ndarray:
+def _check_machine(scene: Scene, crit: float, where: str, error: type[ValueError],
+                   damp: float = 1.0) -> None:
+    """Raise ``error`` naming ``where`` unless the scene with critical-speed scale ``crit`` and
+    support-damping scale ``damp`` is a valid machine (a rotor mass left, within the scene's
+    bounds) whose rest position, under gravity, lies inside the housing clearance."""
+    if crit == 1.0 and damp == 1.0:
+        return
+    balls = float(sum(scene.ball_mass))
+    if loaded_rotor_mass(scene, crit) <= 0.0:
+        raise error(f"{where}: with critical_speed_scale={crit:g} the supported mass "
+                    f"M / s^2 = {scene.total_mass / crit ** 2:g} kg would not even carry the "
+                    f"balls ({balls:g} kg): no rotor mass left; use a smaller scale (below "
+                    f"{math.sqrt(scene.total_mass / balls):.4g})")
+    try:
+        sc = episode_scene(scene, scene.imbalance, 1.0, 1.0, crit, damp)
+    except SceneError as exc:
+        raise error(f"{where}: the machine with critical_speed_scale={crit:g} and "
+                    f"support_damping_scale={damp:g} is not a valid scene: {exc}") from None
+    sag = math.hypot(*rotor.static_deflection(sc))
+    if sag >= scene.housing_clearance:
+        raise error(f"{where}: with critical_speed_scale={crit:g} the supported mass "
+                    f"{sc.total_mass:g} kg sags {sag:g} m under gravity, beyond the housing "
+                    f"clearance {scene.housing_clearance:g} m; use a larger scale")
+
+
+def rotor_eccentricity(scene: Scene, imbalance: np.ndarray, rotor_mass=None) -> np.ndarray:
     """The episodes' rotor eccentricity [m] (:func:`episode_scene`: the nominal one where the
-    imbalance is the nominal one)."""
-    return np.where(imbalance != scene.imbalance, imbalance / scene.rotor_mass,
-                    scene.rotor_eccentricity)
+    imbalance and the rotor mass are the nominal ones); ``rotor_mass`` [kg]: each episode's
+    (default the scene's)."""
+    if rotor_mass is None:
+        return np.where(imbalance != scene.imbalance, imbalance / scene.rotor_mass,
+                        scene.rotor_eccentricity)
+    return np.where((imbalance != scene.imbalance) | (rotor_mass != scene.rotor_mass),
+                    imbalance / rotor_mass, scene.rotor_eccentricity)
 
 
-def packed_rows(scene: Scene, imbalance: np.ndarray, drag: np.ndarray, roll: np.ndarray
+def _ones(values, n: int) -> np.ndarray:
+    return np.ones(n) if values is None else np.asarray(values, float)
+
+
+def packed_rows(scene: Scene, imbalance: np.ndarray, drag: np.ndarray, roll: np.ndarray,
+                critical: np.ndarray | None = None, damping: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(p, b) of the episodes' scenes, (R, N_PARAMS) and (R, n, N_BALL_PARAMS): what
-    ``model.pack_parameters(episode_scene(scene, imbalance[r], drag[r], roll[r]))`` gives, bit
-    for bit, without building the scenes (the few entries an episode changes are computed
-    the way the Scene and :func:`model.pack_parameters` compute them)."""
+    ``model.pack_parameters(episode_scene(scene, imbalance[r], drag[r], roll[r], critical[r],
+    damping[r]))`` gives, bit for bit, without building the scenes (the few entries an
+    episode changes are computed the way the Scene and :func:`model.pack_parameters` compute
+    them).  ``critical``, ``damping``: the critical-speed and support-damping scales (default
+    1)."""
     p0, b0 = mdl.pack_parameters(scene)
     r = imbalance.shape[0]
     p = np.repeat(p0[None], r, axis=0)
     b = np.repeat(b0[None], r, axis=0)
-    p[:, mdl.P_U0] = scene.rotor_mass * rotor_eccentricity(scene, imbalance)  # Scene.imbalance
+    critical = _ones(critical, r)
+    damping = _ones(damping, r)
+    if np.any(critical != 1.0):
+        mass = np.asarray(loaded_rotor_mass(scene, critical), float).reshape(r)
+        p[:, mdl.P_MASS] = mass + float(sum(scene.ball_mass))          # Scene.total_mass
+        p[:, mdl.P_J] = _polar_inertia(scene, mass)
+        p[:, mdl.P_U0] = mass * rotor_eccentricity(scene, imbalance, mass)
+    else:
+        p[:, mdl.P_U0] = scene.rotor_mass * rotor_eccentricity(scene, imbalance)
+    scaled = damping != 1.0
+    p[scaled, mdl.P_CX] = scene.support_damping_x * damping[scaled]
+    p[scaled, mdl.P_CY] = scene.support_damping_y * damping[scaled]
     a = scene.arrays()
     scaled = drag != 1.0
     b[scaled, :, mdl.B_BETA] = (a["ball_drag"][None, :] * drag[scaled, None]
@@ -326,79 +453,145 @@ class Pending:
     roll: np.ndarray
     step: np.ndarray
     reference_length: np.ndarray
+    critical: np.ndarray
+    damping: np.ndarray
+    key: np.ndarray
+    static_deflection: np.ndarray
 
 
 def _stiff_message(setup: Any, drag: float, roll: float, step: float, needed: float,
-                   where: str) -> str:
+                   where: str, machine: str = "") -> str:
     per = setup.control_interval / step
     return (f"{where}: an episode with ball_drag_scale={drag:g} and rolling_resistance_scale="
-            f"{roll:g} is too stiff for integrator='rk4': its ball drag and rolling resistance "
+            f"{roll:g}{machine} is too stiff for integrator='rk4': its ball drag and rolling "
+            f"resistance "
             f"force a {step:.3g} s step ({per:.3g} RK4 steps per {setup.control_interval:g} s "
             f"control interval, {needed / step:.3g} x shorter than the {needed:.3g} s its "
             f"rotation needs; at most {MAX_STIFFNESS:g} x is allowed); use integrator='etdrk4' "
             f"(integrates the stiff drag exactly at the ordinary step) or smaller scales")
 
 
-def _rk4_steps(setup: Any, p: np.ndarray, b: np.ndarray, drag, roll, where: str,
-               error: type[ValueError] = ValueError) -> np.ndarray:
-    """The RK4 step of each packed episode [s] (drag and rolling-resistance scales ``drag``,
-    ``roll``); raises ``error`` if the stiffest needs a step more than :data:`MAX_STIFFNESS`
-    times shorter than its rotation alone does (module docstring)."""
+def _machine_rates(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each packed episode's ``critical_speeds[1]`` [rad/s] and :func:`explicit_rate` [1/s]
+    without a drive (what :func:`default_step` reads from a Scene, computed the same way)."""
+    mass = p[:, mdl.P_MASS]
+    return (np.sqrt(p[:, mdl.P_KY] / mass),
+            np.maximum(p[:, mdl.P_CX], p[:, mdl.P_CY]) / mass)
+
+
+def _steps(setup: Any, p: np.ndarray, method: str, rate, varied: bool) -> np.ndarray:
+    """:func:`default_step` of each packed episode (``varied``: their masses or support
+    damping differ from the scene's)."""
     sc = setup.scene
+    if not varied:
+        return default_step(sc, setup.max_speed, method, rate=rate)
+    crit, other = _machine_rates(p)
+    return default_step(sc, setup.max_speed, method, rate=rate, critical_speed=crit,
+                        other_rate=other)
+
+
+def _rk4_steps(setup: Any, p: np.ndarray, b: np.ndarray, drag, roll, where: str,
+               error: type[ValueError] = ValueError, critical=None, damping=None
+               ) -> np.ndarray:
+    """The RK4 step of each packed episode [s] (drag and rolling-resistance scales ``drag``,
+    ``roll``; critical-speed and support-damping scales ``critical``, ``damping``); raises
+    ``error`` if the stiffest needs a step more than :data:`MAX_STIFFNESS` times shorter than
+    its rotation alone does (module docstring)."""
+    n = p.shape[0]
+    critical = _ones(critical, n)
+    damping = _ones(damping, n)
+    varied = bool(np.any(critical != 1.0) or np.any(damping != 1.0))
     rate = stiff_rates(p, b, setup.max_speed)
-    step = np.broadcast_to(np.asarray(default_step(sc, setup.max_speed, "rk4", rate=rate),
-                                      float), (p.shape[0],))
-    needed = float(default_step(sc, setup.max_speed, "rk4", rate=0.0))
-    k = int(np.argmin(step))
-    if needed > MAX_STIFFNESS * step[k]:
-        raise error(_stiff_message(setup, drag[k], roll[k], step[k], needed, where))
+    step = np.broadcast_to(np.asarray(_steps(setup, p, "rk4", rate, varied), float), (n,))
+    needed = np.broadcast_to(np.asarray(_steps(setup, p, "rk4", np.zeros(n) if varied else 0.0,
+                                               varied), float), (n,))
+    k = int(np.argmax(needed / step))
+    if needed[k] > MAX_STIFFNESS * step[k]:
+        machine = (f", critical_speed_scale={critical[k]:g} and support_damping_scale="
+                   f"{damping[k]:g}" if varied else "")
+        raise error(_stiff_message(setup, drag[k], roll[k], step[k], needed[k], where,
+                                   machine))
     return step
+
+
+def _corners(value) -> list[float]:
+    return [1.0] if value is None else [float(v) for v in np.atleast_1d(value)]
+
+
+def check_preset_machines(setup: Any) -> None:
+    """Raise PresetError naming the field if a corner of the preset's critical-speed and
+    support-damping ranges is not a machine (no rotor mass left, a field out of the scene's
+    bounds, or under gravity a static sag beyond the housing clearance)."""
+    cfg = setup.config
+    rz = cfg.randomize
+    where = f"environment preset {cfg.name!r}: field 'randomize.%s'"
+    # (each scale on its own: neither changes what makes the other one valid)
+    for crit in _corners(rz.critical_speed_scale):
+        _check_machine(setup.scene, crit, where % "critical_speed_scale", PresetError)
+    for damp in _corners(rz.support_damping_scale):
+        _check_machine(setup.scene, 1.0, where % "support_damping_scale", PresetError, damp)
 
 
 def check_preset_stiffness(setup: Any) -> None:
     """Raise PresetError (a ValueError) if the preset's ``randomize`` ranges allow an episode
-    too stiff for RK4 (module docstring): checked at the corners of the drag and
-    rolling-resistance ranges, where the stiff rate, which grows with both scales, is
-    largest."""
+    too stiff for RK4 (module docstring): checked at the corners of the drag,
+    rolling-resistance, critical-speed and support-damping ranges: the stiff rate grows with
+    the first two scales, the rotation's step shrinks as the machine gets lighter (a higher
+    critical speed) and, with heavy damping, as c / M grows."""
     cfg = setup.config
     if cfg.integrator != "rk4" or cfg.integration_step is not None:
         return
     rz = cfg.randomize
-    drags = [1.0] if rz.ball_drag_scale is None else np.atleast_1d(rz.ball_drag_scale)
-    rolls = ([1.0] if rz.rolling_resistance_scale is None
-             else np.atleast_1d(rz.rolling_resistance_scale))
-    corners = np.array([(float(dv), float(rv)) for dv in drags for rv in rolls])
+    corners = np.array([(dv, rv, cv, sv) for dv in _corners(rz.ball_drag_scale)
+                        for rv in _corners(rz.rolling_resistance_scale)
+                        for cv in _corners(rz.critical_speed_scale)
+                        for sv in _corners(rz.support_damping_scale)])
     sc = setup.scene
     imbalance = np.full(len(corners), sc.imbalance)
-    p, b = packed_rows(sc, imbalance, corners[:, 0], corners[:, 1])
+    p, b = packed_rows(sc, imbalance, corners[:, 0], corners[:, 1], corners[:, 2],
+                       corners[:, 3])
     _rk4_steps(setup, p, b, corners[:, 0], corners[:, 1],
-               f"environment preset {cfg.name!r} (its randomize ranges allow it)", PresetError)
+               f"environment preset {cfg.name!r} (its randomize ranges allow it)", PresetError,
+               corners[:, 2], corners[:, 3])
 
 
-def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, drag, roll
-            ) -> Pending:
+def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, drag, roll,
+            critical=None, damping=None, key=None) -> Pending:
     """The start of the episodes of ``rows`` (rotor at rest), computed without changing
-    anything: the values are arrays over ``rows`` (``angles``: (R, n)).  Raises ValueError for
-    an episode too stiff for RK4 (module docstring)."""
+    anything: the values are arrays over ``rows`` (``angles``: (R, n); ``critical``,
+    ``damping`` the critical-speed and support-damping scales, default 1; ``key`` the noise
+    keys, default 0).  Raises ValueError for an episode too stiff for RK4 (module
+    docstring)."""
     sc = setup.scene
     nb = sc.ball_count
     nq = 3 + nb
     rows = np.asarray(rows, dtype=np.int64)
+    n = len(rows)
     imbalance = np.asarray(imbalance, float)
     phase = np.asarray(phase, float)
-    angles = np.asarray(angles, float).reshape(len(rows), nb)
+    angles = np.asarray(angles, float).reshape(n, nb)
     drag = np.asarray(drag, float)
     roll = np.asarray(roll, float)
-    p, b = packed_rows(sc, imbalance, drag, roll)
+    critical = _ones(critical, n)
+    damping = _ones(damping, n)
+    key = np.zeros(n, dtype=np.int64) if key is None else np.asarray(key, np.int64)
+    varied = bool(np.any(critical != 1.0) or np.any(damping != 1.0))
+    p, b = packed_rows(sc, imbalance, drag, roll, critical, damping)
     step = setup.config.integration_step
     if step is None:
         if setup.config.integrator == "rk4":
-            step = _rk4_steps(setup, p, b, drag, roll, "reset")
+            step = _rk4_steps(setup, p, b, drag, roll, "reset", ValueError, critical, damping)
         else:
-            step = default_step(sc, setup.max_speed, setup.config.integrator,
-                                rate=np.zeros(len(rows)))
-    step = np.array(np.broadcast_to(np.asarray(step, float), (len(rows),)))
-    xs, ys = table.static_deflection
+            step = _steps(setup, p, setup.config.integrator, np.zeros(n), varied)
+    step = np.array(np.broadcast_to(np.asarray(step, float), (n,)))
+    mass = p[:, mdl.P_MASS]
+    if varied:
+        sag = np.column_stack(np.broadcast_arrays(*rotor.static_deflection(sc, mass)))
+        sag = np.array(np.broadcast_to(sag, (n, 2)))
+    else:
+        sag = np.tile(np.array(rotor.static_deflection(sc)), (n, 1))
+    xs = sag[:, 0]
+    ys = sag[:, 1]
     s = np.zeros((len(rows), 2 * nq))
     s[:, 0] = xs
     s[:, 1] = ys
@@ -406,7 +599,12 @@ def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, dra
     s[:, 3:nq] = angles
     u0 = p[:, mdl.P_U0]
     u_ref = rotor.imbalance_scale(sc, u0)
-    a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed, u_ref)
+    if varied:
+        # the reward's scales: this episode's machine with its balancer off
+        a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed, u_ref, mass=mass,
+                                                  damping_scale=damping)
+    else:
+        a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed, u_ref)
     st = np.zeros((len(rows), N_ST))
     acc = np.zeros(runup.N_ACC)
     runup.reset(acc)
@@ -419,6 +617,10 @@ def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, dra
     st[:, S_UBEST] = rotor.best_residual(sc, u0)
     st[:, S_DTMAX] = step
     st[:, S_NSEG] = 1.0
+    # the reference mark: the rotor starts with its imbalance at angle `phase` from the
+    # fixed x axis and its mark on it, so the imbalance lies `phase` from the mark
+    st[:, S_MARK] = phase
+    st[:, S_NKEY] = key
     w = setup.config.reward
     clear = sc.housing_clearance
     st[:, S_PEN_RATE] = w.vibration * clear / a_peak + w.time + w.effort * setup.effort_bound
@@ -429,9 +631,16 @@ def prepare(setup: Any, table: EpisodeTable, rows, imbalance, phase, angles, dra
     if extra:
         raise RuntimeError(f"episodes of scene {sc.name!r} need kernel effects {extra} beyond "
                            f"the environment's {setup.spec}")
-    ref = reference_length(rotor_eccentricity(sc, imbalance), sc.race_eccentricity,
-                           sc.balancing_capacity, sc.total_mass)
-    return Pending(rows, p, b, s, st, d, imbalance, phase, angles, drag, roll, step, ref)
+    if varied:
+        rotor_mass = (np.asarray(loaded_rotor_mass(sc, critical), float).reshape(n)
+                      if np.any(critical != 1.0) else None)
+        ref = reference_length(rotor_eccentricity(sc, imbalance, rotor_mass),
+                               sc.race_eccentricity, sc.balancing_capacity, mass)
+    else:
+        ref = reference_length(rotor_eccentricity(sc, imbalance), sc.race_eccentricity,
+                               sc.balancing_capacity, sc.total_mass)
+    return Pending(rows, p, b, s, st, d, imbalance, phase, angles, drag, roll, step, ref,
+                   critical, damping, key, sag)
 
 
 def commit(bufs: Any, table: EpisodeTable, pending: Pending) -> None:
@@ -450,5 +659,9 @@ def commit(bufs: Any, table: EpisodeTable, pending: Pending) -> None:
     table.ball_angles[rows] = pending.angles
     table.ball_drag_scale[rows] = pending.drag
     table.rolling_resistance_scale[rows] = pending.roll
+    table.critical_speed_scale[rows] = pending.critical
+    table.support_damping_scale[rows] = pending.damping
+    table.noise_key[rows] = pending.key
+    table.static_deflection[rows] = pending.static_deflection
     table.integration_step[rows] = pending.step
     table.reference_length[rows] = pending.reference_length

@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from ..physics.specialise import Specialised
 
-from ..physics import batch, rotor, runup
+from ..physics import batch, rotor, runup, sensors
 from ..physics import drive_law as dl
 from . import actions
 from .layout import *  # noqa: F401,F403  (the column names are the kernel's vocabulary)
@@ -73,11 +73,26 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace):
     na = int(cfg[C_NACT])
     for a in range(na):
         obs[i, 5 + a] = st[i, S_ACT + a]
+    c = 5 + na
+    if cfg[C_SYNC] != 0.0:
+        # the synchronous vibration (abb_gym.physics.sensors): the tracking filter's output
+        # plus the read-out noise of this control step
+        zx = st[i, S_ZX]
+        zy = st[i, S_ZY]
+        if cfg[C_SYNC_NOISE] > 0.0:
+            n1, n2 = sensors.gaussian_pair(st[i, S_NKEY], st[i, S_K])
+            zx += cfg[C_SYNC_NOISE] * n1
+            zy += cfg[C_SYNC_NOISE] * n2
+        amp = math.sqrt(zx * zx + zy * zy)
+        obs[i, c] = _clip(amp / vs, 0.0, vh)
+        obs[i, c + 1] = zx / amp if amp > 0.0 else 0.0
+        obs[i, c + 2] = zy / amp if amp > 0.0 else 0.0
+        c += 3
     if cfg[C_OBS_BALLS] != 0.0:
         for k in range(nb):
             ph = s[i, 3 + k]
-            obs[i, 5 + na + 2 * k] = math.cos(ph)
-            obs[i, 6 + na + 2 * k] = math.sin(ph)
+            obs[i, c + 2 * k] = math.cos(ph)
+            obs[i, c + 1 + 2 * k] = math.sin(ph)
     out[i, O_R] = math.sqrt(x * x + y * y)
     out[i, O_RDYN] = math.sqrt(dx * dx + dy * dy)
     _balance(i, s, p, b, st, cfg, out)
@@ -109,6 +124,12 @@ def _interval_begin(i, st, cfg, f, g, lane):
     f[batch.W_YS, lane] = st[i, S_YS]
     g[batch.G_NSEG, lane] = int(st[i, S_NSEG])
     g[batch.G_J, lane] = int(st[i, S_J])
+    f[batch.W_SYNC, lane] = cfg[C_SYNC]
+    if cfg[C_SYNC] != 0.0:
+        f[batch.W_LAG, lane] = cfg[C_SYNC_LAG]
+        f[batch.W_MARK, lane] = st[i, S_MARK]
+        f[batch.W_ZX, lane] = st[i, S_ZX]
+        f[batch.W_ZY, lane] = st[i, S_ZY]
 
 
 @njit(cache=True)
@@ -133,6 +154,10 @@ def _interval_end(i, s, d, st, cfg, out, f, g, lane):
     out[i, O_WXS] = f[batch.W_XS, lane]
     out[i, O_WYS] = f[batch.W_YS, lane]
     out[i, O_WDMAX] = f[batch.W_DMAX, lane]
+    if cfg[C_SYNC] != 0.0 and status == 0:
+        # (a failed interval keeps the filter where the state is: at the interval start)
+        st[i, S_ZX] = f[batch.W_ZX, lane]
+        st[i, S_ZY] = f[batch.W_ZY, lane]
     st[i, S_K] = kk + 1.0
     acc = st[i, S_ACC:S_ACC + runup.N_ACC]
     wop = cfg[C_WOP]

@@ -16,13 +16,20 @@ from ..physics.runup import N_ACC
 (C_KIND, C_DT, C_WOP, C_BAND, C_OVERSPEED, C_TLIM, C_AMAX, C_CLEAR, C_VSCALE, C_FILT,
  C_SETTLE, C_NMAX, C_BACKSTOP, C_TREF, C_WV, C_WT, C_WE, C_WR, C_WF, C_NACT, C_OBS_BALLS,
  C_SPEED_LO, C_SPEED_HI, C_VIB_HI, C_BAL_TOL, C_TEP, C_METHOD) = range(27)
-N_CFG = 27
+# the synchronous vibration observation (abb_gym.physics.sensors): on (1) or off (0), the
+# tracking filter's time constant [s], the read-out noise [m] (standard deviation per component)
+(C_SYNC, C_SYNC_LAG, C_SYNC_NOISE) = range(27, 30)
+N_CFG = 30
 # ---------------------------------------------------------------- st: per-environment state
 # S_ACC .. S_ACC + runup.N_ACC - 1: the run-up metrics accumulator (abb_gym.physics.runup)
 (S_K, S_FILT, S_PEAK, S_DONE, S_TERM, S_TRUNC, S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX,
  S_NSEG, S_J, S_PEN_RATE, S_PEN_TERM, S_XS, S_YS, S_ACT) = range(18)
 S_ACC = S_ACT + 3  # up to three action entries
-N_ST = S_ACC + N_ACC
+# after the accumulator: the synchronous demodulator's reference-mark offset th_mark [rad] (the
+# imbalance's angle from the mark), its filter state [m], the episode's noise key (an integer
+# < 2^53)
+(S_MARK, S_ZX, S_ZY, S_NKEY) = range(S_ACC + N_ACC, S_ACC + N_ACC + 4)
+N_ST = S_ACC + N_ACC + 4
 # ---------------------------------------------------------------- out: per-step outputs
 (O_REWARD, O_VIB, O_TIME, O_EFFORT, O_RESID, O_FAIL, O_TERM, O_TRUNC, O_FCODE, O_FTIME,
  O_FINDEX, O_R, O_RDYN, O_IMB, O_BAL, O_ACTFLAG, O_STEPS, O_WINT, O_WMAX, O_WXS,

@@ -30,8 +30,8 @@ from . import kernel
 from .kernel import N_G_ENV, observe_rows
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT, C_KIND,
                      C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OVERSPEED, C_SETTLE, C_SPEED_HI,
-                     C_SPEED_LO, C_TEP, C_TLIM, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP,
-                     C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG,
+                     C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM, C_TREF,
+                     C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP, C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG,
                      N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
                      T_VIB, T_VIBMAX, T_W, T_X, T_Y)
 
@@ -78,7 +78,11 @@ class Buffers:
         self.st = np.zeros((n, N_ST))
         self.st[:, S_DONE] = 1.0
         self.st[:, S_USCALE] = 1.0
-        self.obs = np.zeros((n, setup.obs_dim), dtype=np.float32)
+        self.obs = np.zeros((n, setup.frame_dim), dtype=np.float32)
+        # the last frame_stack observations, oldest first (None: no stacking)
+        self.frame_stack = setup.frame_stack
+        self.frames = (np.zeros((n, setup.obs_dim), dtype=np.float32)
+                       if setup.frame_stack > 1 else None)
         self.out = np.zeros((n, N_OUT))
         k = setup.max_steps + 1 if n_trace > 0 else 0
         self.trace = np.zeros((min(n_trace, n), k, T_BALLS + nb))
@@ -127,8 +131,29 @@ class Buffers:
                 "vibration_max": rows[:, T_VIBMAX].copy(), "ball_angles": rows[:, T_BALLS:].copy()}
 
     def observe(self, rows: np.ndarray) -> None:
-        observe_rows(np.asarray(rows, dtype=np.int64), self.s, self.p, self.b, self.st,
-                     self.cfg, self.obs, self.out, self.trace)
+        """Observe ``rows`` after a reset (their frame stacks filled with the first one)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        observe_rows(rows, self.s, self.p, self.b, self.st, self.cfg, self.obs, self.out,
+                     self.trace)
+        self.fill_frames(rows)
+
+    @property
+    def observations(self) -> np.ndarray:
+        """What the environments return: the observations, or their frame stacks."""
+        return self.obs if self.frames is None else self.frames
+
+    def fill_frames(self, rows: np.ndarray) -> None:
+        """Every frame of ``rows`` := their current observation (the start of an episode)."""
+        if self.frames is not None and len(rows):
+            self.frames[rows] = np.tile(self.obs[rows], (1, self.frame_stack))
+
+    def push_frames(self) -> None:
+        """Shift every row's frames by one and append the current observation (after a
+        step)."""
+        if self.frames is not None:
+            d = self.obs.shape[1]
+            self.frames[:, :-d] = self.frames[:, d:].copy()
+            self.frames[:, -d:] = self.obs
 
 
 def _as_int_steps(seconds: float, dt: float) -> int:
@@ -185,27 +210,44 @@ class EnvSetup:
         # with the scene's imbalance
         self.vibration_scale = rotor.reference_amplitudes(sc, self.operating_speed)[0]
         self.vibration_bound = sc.housing_clearance / self.vibration_scale
-        # refuse now a preset whose random episodes would need millions of RK4 steps per
+        # refuse now a preset whose random machines do not exist (no rotor mass left, sagging
+        # onto the housing) or whose random episodes would need millions of RK4 steps per
         # control interval, rather than at an automatic reset in the middle of training
+        episodes.check_preset_machines(self)
         episodes.check_preset_stiffness(self)
         self.effort_bound = am.effort_bound(cfg)
         self.n_actions = am.n_actions
         self.n_rows = am.n_rows
         nb = sc.ball_count
-        self.obs_dim = 5 + self.n_actions + (2 * nb if self.observe_balls else 0)
+        self.sync = cfg.sync_vibration.enabled
+        self.frame_stack = int(cfg.frame_stack)
+        # one frame: the kernel's observation row
+        self.frame_dim = (5 + self.n_actions + (3 if self.sync else 0)
+                          + (2 * nb if self.observe_balls else 0))
+        self.obs_dim = self.frame_stack * self.frame_dim
         speed_lo, speed_hi = am.speed_bounds(cfg)
-        lo = [speed_lo, -self.vibration_bound, -self.vibration_bound, 0.0, 0.0]
-        hi = [speed_hi, self.vibration_bound, self.vibration_bound, self.vibration_bound, 1.0]
-        lo += [-1.0] * self.n_actions + [-1.0] * (self.obs_dim - 5 - self.n_actions)
-        hi += [1.0] * self.n_actions + [1.0] * (self.obs_dim - 5 - self.n_actions)
-        self.observation_space = spaces.Box(np.array(lo, np.float32), np.array(hi, np.float32),
-                                            dtype=np.float32)
+        vb = self.vibration_bound
+        lo = [speed_lo, -vb, -vb, 0.0, 0.0] + [-1.0] * self.n_actions
+        hi = [speed_hi, vb, vb, vb, 1.0] + [1.0] * self.n_actions
+        names = (["rotor_speed", "vibration_x", "vibration_y", "vibration_amplitude",
+                  "time_fraction"] + [f"last_action[{a}]" for a in range(self.n_actions)])
+        if self.sync:
+            lo += [0.0, -1.0, -1.0]
+            hi += [vb, 1.0, 1.0]
+            names += ["sync_amplitude", "sync_cos", "sync_sin"]
+        if self.observe_balls:
+            lo += [-1.0] * (2 * nb)
+            hi += [1.0] * (2 * nb)
+            names += [f"{fn}(ball_angle[{k}])" for k in range(nb) for fn in ("cos", "sin")]
+        k = self.frame_stack
+        if k > 1:
+            # frames oldest first; "name@t-2" is the entry two control steps back
+            names = [n if k - 1 - j == 0 else f"{n}@t-{k - 1 - j}"
+                     for j in range(k) for n in names]
+        self.observation_space = spaces.Box(np.array(lo * k, np.float32),
+                                            np.array(hi * k, np.float32), dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self.n_actions,), dtype=np.float32)
-        self.obs_names = (["rotor_speed", "vibration_x", "vibration_y", "vibration_amplitude",
-                           "time_fraction"]
-                          + ([f"last_action[{a}]" for a in range(self.n_actions)])
-                          + [f"{fn}(ball_angle[{k}])" for k in range(nb) for fn in ("cos", "sin")
-                             if self.observe_balls])
+        self.obs_names = names
         w = cfg.reward
         c = np.zeros(N_CFG)
         c[C_KIND] = am.kind_id
@@ -231,10 +273,15 @@ class EnvSetup:
         c[C_BAL_TOL] = cfg.balance_tolerance
         c[C_TEP] = self.episode_length
         c[C_METHOD] = integ.METHOD_IDS[cfg.integrator]
+        sync = cfg.sync_vibration
+        c[C_SYNC] = 1.0 if sync.enabled else 0.0
+        c[C_SYNC_LAG] = sync.lag
+        c[C_SYNC_NOISE] = sync.noise * self.vibration_scale  # [m]
         self.cfg = c
         self._state_names = state_names(nb)
         # the compiled step's effect set: the nominal scene's (an episode only rescales the
-        # scene's drag and rolling resistance, so it never needs a term the nominal lacks)
+        # scene's drag, rolling resistance, mass and support damping, so it never needs a term
+        # the nominal lacks)
         p_nominal, _ = mdl.pack_parameters(sc)
         row = np.zeros(dl.N_DRIVE)
         row[dl.D_MODE] = am.mode
@@ -248,8 +295,10 @@ class EnvSetup:
         states (which a caller rolls back on error): :func:`episodes.commit` writes it."""
         values = [episodes.draw(self, rng, None if options is None else options[k])
                   for k, rng in enumerate(rngs)]
-        imbalance, phase, angles, drag, roll = (np.array(v) for v in zip(*values))
-        return episodes.prepare(self, table, rows, imbalance, phase, angles, drag, roll)
+        imbalance, phase, angles, drag, roll, crit, damp, key = (np.array(v)
+                                                                  for v in zip(*values))
+        return episodes.prepare(self, table, rows, imbalance, phase, angles, drag, roll, crit,
+                                damp, key)
 
     def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
                    rngs: list, options: list | None = None) -> None:

@@ -227,7 +227,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         self._started = True
         info = self._info(np.ones(n, dtype=bool) if mask is None else mask, reset_rows=rows,
                           level="full")
-        return self._bufs.obs.copy(), info
+        return self._bufs.observations.copy(), info
 
     def _options_for(self, i: int, options: dict[str, Any]) -> dict[str, Any] | None:
         if not options:
@@ -289,8 +289,9 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         if step is None:
             step = self._step_fn = bf.step_function()
         step(*self._args)
+        bf.push_frames()
         if rows.size:
-            bf.observe(rows)
+            bf.observe(rows)  # (and their frame stacks start again)
             bf.active[:] = 1
         out = bf.out
         terminated = out[:, O_TERM] != 0.0
@@ -299,7 +300,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         self._prev_done = terminated | truncated
         mask = np.ones(n, dtype=bool)
         info = self._info(mask, reset_rows=rows, done=self._prev_done)
-        return bf.obs.copy(), reward, terminated, truncated, info
+        return bf.observations.copy(), reward, terminated, truncated, info
 
     def _info(self, mask: np.ndarray, reset_rows: np.ndarray, level: str | None = None,
               done: np.ndarray | None = None) -> dict[str, Any]:

@@ -56,6 +56,7 @@ from numba import njit, prange
 from . import drive_law as dl
 from . import integrators as integ
 from . import model as mdl
+from . import sensors
 from .specialise import Specialised, resolve_kernel
 
 __all__ = ["advance_block", "run_batch", "Blocks", "lanes_per_block", "lane_order"]
@@ -63,7 +64,11 @@ __all__ = ["advance_block", "run_batch", "Blocks", "lanes_per_block", "lane_orde
 # f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators
 (F_T0, F_T1, F_HMAX, F_TP, F_PE, F_H, F_TC, F_TT, F_TFAIL, W_INT, W_MAX, W_XS, W_YS,
  W_DMAX) = range(14)
-N_F = 14
+# the synchronous demodulator (:mod:`abb_gym.physics.sensors`), run when W_SYNC != 0: its
+# low-pass time constant [s], the reference mark's offset th_mark [rad], the filter state
+# (in and out) [m], the filter gain of the current piece's step
+(W_SYNC, W_LAG, W_MARK, W_ZX, W_ZY, W_GAIN) = range(14, 20)
+N_F = 20
 # g rows: taking part, still running, segment, segment count, steps left in the piece, step
 # index in the piece, status, first non-finite state entry, steps taken, environment row
 (G_ON, G_RUN, G_J, G_NSEG, G_LEFT, G_IX, G_STATUS, G_BAD, G_STEPS, G_ROW) = range(10)
@@ -168,6 +173,10 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
     h = f[F_H]
     tc = f[F_TC]
     tt = f[F_TT]
+    sync = False
+    for l in range(L):
+        if g[G_ON, l] != 0 and f[W_SYNC, l] != 0.0:
+            sync = True
     while True:
         running = False
         for l in range(L):
@@ -192,6 +201,8 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
                 g[G_IX, l] = 0
                 f[F_PE, l] = piece_end
                 h[l] = hh
+                if f[W_SYNC, l] != 0.0:
+                    f[W_GAIN, l] = sensors.filter_gain(hh, f[W_LAG, l])
                 for c in range(dl.N_DRIVE):
                     d[c, l] = table[j, c]
             tc[l] = f[F_TP, l] + g[G_IX, l] * h[l]
@@ -227,6 +238,15 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             r = math.sqrt(x * x + y * y)
             if r > f[W_MAX, l]:
                 f[W_MAX, l] = r
+        if sync:
+            # a loop of its own, free of early exits, so that it vectorises across the lanes
+            for l in range(L):
+                if act[l] != 0 and g[G_STATUS, l] == integ.STATUS_OK and f[W_SYNC, l] != 0.0:
+                    ux, uy = sensors.demodulate(s[0, l] - f[W_XS, l], s[1, l] - f[W_YS, l],
+                                                s[2, l] - f[W_MARK, l])
+                    a = f[W_GAIN, l]
+                    f[W_ZX, l] += a * (ux - f[W_ZX, l])
+                    f[W_ZY, l] += a * (uy - f[W_ZY, l])
 
 
 @njit(cache=True, parallel=True, error_model="numpy")

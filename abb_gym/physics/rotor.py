@@ -11,6 +11,7 @@ function                       unit        fact
 :func:`best_residual`          kg m        the smallest residual the balls can reach
 :func:`is_balanced`            bool        residual within a tolerance of the best
 :func:`reference_amplitudes`   m           whirl of the same machine with its balancer off
+:func:`jeffcott_response`      m, rad      steady synchronous whirl: amplitude and phase lag
 :func:`spinning_inertia`       kg m^2      rotor plus balls rolling along with it
 :func:`static_deflection`      m           rest position of the rotor centre (gravity sag)
 =============================  ==========  ===================================================
@@ -44,6 +45,7 @@ from .scene import Scene
 
 __all__ = ["IMBALANCE_FLOOR", "imbalance_scale", "residual_imbalance", "residual_imbalance_packed",
            "best_residual", "is_balanced", "reference_amplitudes", "jeffcott_amplitude",
+           "jeffcott_response",
            "spinning_inertia", "static_deflection"]
 
 
@@ -122,17 +124,49 @@ def jeffcott_amplitude(imbalance: float, mass: float, stiffness: float, damping:
     return imbalance * w2 / den if den > 0 else math.inf
 
 
-def reference_amplitudes(scene: Scene, operating_speed: float, imbalance: float | None = None
-                         ) -> tuple[float, float]:
+def jeffcott_response(imbalance: float, mass: float, stiffness: float, damping: float,
+                      speed: float) -> tuple[float, float]:
+    """Steady synchronous whirl of a Jeffcott rotor at constant ``speed`` [rad/s]: (amplitude
+    [m], phase lag [rad]).  From ``M z'' + c z' + k z = U W^2 e^{i W t}``:
+    ``z = U W^2 / (k - M W^2 + i c W) e^{i W t}``, so the whirl trails the imbalance by
+    ``atan2(c W, k - M W^2)`` in [0, pi] (0 below the critical speed sqrt(k/M), pi/2 at it,
+    towards pi above) with the amplitude of :func:`jeffcott_amplitude`."""
+    w2 = speed * speed
+    return (jeffcott_amplitude(imbalance, mass, stiffness, damping, speed),
+            math.atan2(damping * speed, stiffness - mass * w2))
+
+
+def reference_amplitudes(scene: Scene, operating_speed: float, imbalance: float | None = None,
+                         mass=None, damping_scale=None) -> tuple[float, float]:
     """(peak over [0, w_op], value at w_op) [m] of the steady whirl of the same machine with
     its balancer off (module docstring): mass ``total_mass``, the scene's support, imbalance
     ``imbalance`` [kg m] (default: :func:`imbalance_scale`; an array gives arrays).
+    ``mass`` [kg] and ``damping_scale`` (a factor on the support damping) describe a machine
+    that differs from the scene (an episode of a preset that randomises them); arrays of them
+    give arrays, computed row by row as for a scene with those values.
 
     With an orthotropic support each axis is a Jeffcott oscillator of its own; the orbit's
     major semi-axis is the larger of the two amplitudes.  The peak of ``U w^2 / |...|`` lies at
     ``w*^2 = k / (m - c^2 / (2 k))`` (if that is positive and ``w* <= w_op``), else at w_op.
     """
     u = imbalance_scale(scene) if imbalance is None else imbalance
+    if mass is not None or damping_scale is not None:
+        n = np.broadcast(u, 1.0 if mass is None else mass,
+                         1.0 if damping_scale is None else damping_scale).shape
+        us = np.broadcast_to(np.asarray(u, float), n)
+        ms = np.broadcast_to(np.asarray(scene.total_mass if mass is None else mass, float), n)
+        ds = np.broadcast_to(np.asarray(1.0 if damping_scale is None else damping_scale, float),
+                             n)
+        peak = np.empty(n)
+        at_op = np.empty(n)
+        for r in np.ndindex(*n):
+            peak[r], at_op[r] = _reference_amplitudes(
+                float(us[r]), float(ms[r]), scene.support_stiffness_x,
+                scene.support_stiffness_y, _scaled(scene.support_damping_x, float(ds[r])),
+                _scaled(scene.support_damping_y, float(ds[r])), operating_speed)
+        if peak.ndim == 0:
+            return float(peak), float(at_op)
+        return peak, at_op
     m = scene.total_mass
     peak = 0.0
     at_op = 0.0
@@ -151,6 +185,27 @@ def reference_amplitudes(scene: Scene, operating_speed: float, imbalance: float 
     return peak, at_op
 
 
+def _scaled(value: float, factor: float) -> float:
+    """``value * factor``, exactly ``value`` for the factor 1 (how episodes scale a field)."""
+    return value if factor == 1.0 else value * factor
+
+
+def _reference_amplitudes(u: float, m: float, kx: float, ky: float, cx: float, cy: float,
+                          operating_speed: float) -> tuple[float, float]:
+    """:func:`reference_amplitudes` of one machine given by its numbers."""
+    peak = at_op = 0.0
+    for k, c in ((kx, cx), (ky, cy)):
+        a_op = jeffcott_amplitude(u, m, k, c, operating_speed)
+        at_op = max(at_op, a_op)
+        peak = max(peak, a_op)
+        den = m - c * c / (2.0 * k)
+        if den > 0:
+            w_star = math.sqrt(k / den)
+            if w_star <= operating_speed:
+                peak = max(peak, jeffcott_amplitude(u, m, k, c, w_star))
+    return peak, at_op
+
+
 def spinning_inertia(scene: Scene) -> float:
     """Polar inertia [kg m^2] of the rotor with the balls rolling along with it: the rotor's
     ``J`` plus, per ball, its spin inertia (it turns with the rotor) and ``m_i (R^2 + E^2)``,
@@ -161,16 +216,17 @@ def spinning_inertia(scene: Scene) -> float:
     return scene.rotor_polar_inertia + float(np.sum(ball_spin + orbit))
 
 
-def static_deflection(scene: Scene) -> tuple[float, float]:
+def static_deflection(scene: Scene, mass=None) -> tuple[float, float]:
     """Rest position (x, y) [m] of the rotor centre: the sag ``M g / k`` under gravity, else 0.
 
     Gravity acts in the balancing plane only for a horizontal-axis rotor (scenes with
     ``gravity_acceleration > 0``); then the supported mass M hangs at ``M g_x / k_x``,
-    ``M g_y / k_y``."""
+    ``M g_y / k_y``.  ``mass``: the supported mass [kg] instead of the scene's (an array gives
+    arrays: the episodes of a preset that varies the load)."""
     g = scene.gravity_acceleration
     if g <= 0.0:
         return 0.0, 0.0
     a = scene.gravity_angle
-    m = scene.total_mass
+    m = scene.total_mass if mass is None else mass
     return (m * g * math.cos(a) / scene.support_stiffness_x,
             m * g * math.sin(a) / scene.support_stiffness_y)

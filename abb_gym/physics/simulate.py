@@ -105,10 +105,14 @@ def explicit_rate(scene: Scene, drive=None) -> float:
     return rate
 
 
-def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None, drive=None):
+def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None, drive=None,
+                 critical_speed=None, other_rate=None):
     """Default step [s] of the fixed-step methods for a run reaching ``max_speed`` [rad/s]
     (``rate``: the :func:`stiff_rate` if known, or an array of them: an array of steps;
-    ``drive``: the run's drive, for :func:`explicit_rate`).
+    ``drive``: the run's drive, for :func:`explicit_rate`).  ``critical_speed`` (the scene's
+    ``critical_speeds[1]``) and ``other_rate`` (:func:`explicit_rate`) may be given, as numbers
+    or arrays, for machines that differ from ``scene`` in mass or support damping (the
+    episodes of a randomised preset): the steps are then those of each such scene.
 
     The step turns the fastest rotation (the higher critical speed or ``max_speed``) by at most
     :data:`ROTATION_PER_STEP` (0.4 rad for RK4, 1.0 rad for ETDRK4, 0.05 rad for the
@@ -123,7 +127,10 @@ def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None,
     not hold: the final ball angles of lu_hung_odd3 with ETDRK4 and ROS2).  The output
     interval also caps the step.
     """
-    omega = max(scene.critical_speeds[1], abs(max_speed), 1e-9)
+    if critical_speed is None:
+        omega = max(scene.critical_speeds[1], abs(max_speed), 1e-9)
+    else:
+        omega = np.maximum(np.maximum(np.asarray(critical_speed, float), abs(max_speed)), 1e-9)
     h = ROTATION_PER_STEP.get(method, 0.4) / omega
     if method == "rk4":
         rate = stiff_rate(scene, max_speed) if rate is None else rate
@@ -131,9 +138,14 @@ def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None,
     elif scene.contact_stiffness > 0:
         h = np.minimum(h, 1.0 / contact_frequency(scene))
     if method in ("rk4", "etdrk4"):
-        other = explicit_rate(scene, drive)
-        if other > 0:
-            h = np.minimum(h, 1.5 / other)
+        other = explicit_rate(scene, drive) if other_rate is None else other_rate
+        if np.ndim(other) == 0:
+            if other > 0:
+                h = np.minimum(h, 1.5 / other)
+        else:
+            other = np.asarray(other, float)
+            pos = other > 0
+            h = np.where(pos, np.minimum(h, 1.5 / np.where(pos, other, 1.0)), h)
     return float(h) if np.ndim(h) == 0 else h
 
 
