@@ -204,3 +204,30 @@ def test_policy_rejects_a_mismatched_environment(smoke_run):
 def test_train_command_reports_bad_input(capsys):
     assert cli_main(["train", "--config", "no_such_config"]) == 2
     assert "unknown PPO config" in capsys.readouterr().err
+
+
+def test_an_agent_observing_the_sync_vibration_is_evaluated_with_it(tmp_path):
+    """An agent trained with the synchronous-vibration observation and a frame stack carries
+    both into its held-out evaluation environment and into `evaluate` (policy.env_kwargs),
+    also inside `replay:`; an environment without them is refused naming the field."""
+    from abb_gym.evaluation.evaluate import evaluate
+    conf = {SPEED: dict(SMOKE[SPEED], n_timesteps=512, eval_freq=10_000, checkpoint_freq=10_000,
+                        env_kwargs=dict(SMOKE[SPEED]["env_kwargs"],
+                                        sync_vibration={"enabled": True, "lag": 0.05},
+                                        frame_stack=2))}
+    cfg = tmp_path / "sync.yml"
+    cfg.write_text(yaml.safe_dump(conf))
+    run = tmp_path / "run"
+    assert cli_main(["train", "--config", str(cfg), "--seed", "1", "--out", str(run),
+                     "--no-progress"]) == 0
+    penv = yaml.safe_load((run / "config.yml").read_text())["_run"]["policy_env"]
+    assert penv["sync_vibration"]["enabled"] is True and penv["frame_stack"] == 2
+    pol = load_policy(run, env_id=SPEED)
+    assert pol.env_kwargs["frame_stack"] == 2
+    for spec in (f"ppo:{run}", f"replay:ppo:{run}"):
+        result = evaluate(SPEED, "yoshida_odd", spec, episodes=2, seed=0)
+        assert len(result.episodes) == 2
+    env = make_native_env(SPEED, 1, dict(scene="yoshida_odd", preset="test",
+                                         control_interval=0.05, frame_stack=2))
+    with pytest.raises(ValueError, match="observation shape|sync_vibration"):
+        pol.reset(env)

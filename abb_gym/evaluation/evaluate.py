@@ -195,6 +195,19 @@ def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
         spec = spec[len("replay:"):] if spec.startswith("replay:") else None
 
 
+def _innermost(policy: str, env_id: str, scene: Any):
+    """The policy a spec runs in the end (``replay:SPEC`` records SPEC)."""
+    while policy.startswith("replay:"):
+        policy = policy[len("replay:"):]
+    return resolve(policy, env_id, scene)
+
+
+def policy_env_kwargs(env_id: str, scene: Any, policy: str) -> dict[str, Any]:
+    """The environment keywords ``policy`` needs (an agent's ``observe_balls``,
+    ``sync_vibration`` and ``frame_stack``: ``policy.env_kwargs``), also inside ``replay:``."""
+    return dict(getattr(_innermost(policy, env_id, scene), "env_kwargs", None) or {})
+
+
 def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwargs: Any) -> str:
     """The environment ``policy`` is evaluated on: ``env_id``, except on DwellProfile for a
     baseline its one action cannot express (a ``knots`` profile, a dwell at another run-up
@@ -203,11 +216,7 @@ def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwarg
     DwellProfile pays what RunUpSpeed pays for the same profile, interval by interval."""
     if env_id != DWELL_ID:
         return env_id
-    inner = policy
-    while inner.startswith("replay:"):
-        inner = inner[len("replay:"):]
-    chosen = resolve(inner, env_id, scene)
-    acts_on = getattr(chosen, "acts_on", None)
+    acts_on = getattr(_innermost(policy, env_id, scene), "acts_on", None)
     if acts_on is None:
         return env_id
     from ..envs.setup import EnvSetup
@@ -232,8 +241,10 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     them in this process (the vector environment already uses both cores).  Every input is
     checked before any chunk runs (:func:`check_inputs`).  On DwellProfile, a baseline its
     action cannot express runs on RunUpSpeed, on the same machines (:func:`policy_env_id`);
-    the result's ``env_id`` says where it ran."""
+    the result's ``env_id`` says where it ran.  The environments carry the keywords the policy
+    needs (:func:`policy_env_kwargs`: a trained agent's observation settings)."""
     check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
+    env_kwargs = {**policy_env_kwargs(env_id, scene, policy), **env_kwargs}
     env_id = policy_env_id(env_id, scene, preset, policy, **env_kwargs)
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)

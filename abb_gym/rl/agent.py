@@ -27,7 +27,9 @@ and the policy-relevant preset fields
 hold, as the training environment did), deciding on the observation at the start of each
 hold; a mismatch raises ``ValueError`` naming the field.  ``policy.env_kwargs`` lists the
 ``gym.make_vec`` keywords the agent needs besides ``scene`` and ``preset`` (e.g.
-``{"observe_balls": True}``).
+``{"observe_balls": True}``, and the observation's preset fields ``sync_vibration`` and
+``frame_stack`` it was trained with); :func:`abb_gym.evaluation.evaluate.evaluate` builds the
+agent's environments with them.
 """
 from __future__ import annotations
 
@@ -37,7 +39,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
+__all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path",
+           "OBSERVATION_FIELDS"]
+
+#: preset fields that shape the observation (the environment must use the agent's values)
+OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
 
 
 def trained_dir() -> Path:
@@ -99,6 +105,9 @@ class PPOPolicy:
         self.env_kwargs: dict[str, Any] = {}
         if self.policy_env.get("observe_balls"):
             self.env_kwargs["observe_balls"] = True
+        for key in OBSERVATION_FIELDS:  # agents saved before these existed lack them
+            if key in self.policy_env:
+                self.env_kwargs[key] = self.policy_env[key]
         self._repeat = 1
         self._single = False
         self._count: np.ndarray | None = None
@@ -139,7 +148,7 @@ class PPOPolicy:
             raise ValueError(f"the agent was trained on {self.env_id} (action kind {kind!r}); "
                              f"the environment's action kind is {setup.kind!r}")
         conf = setup.config.to_dict()
-        for key in ("vibration_filter_time", "dwell"):
+        for key in ("vibration_filter_time", "dwell") + OBSERVATION_FIELDS:
             if key in self.policy_env and conf[key] != self.policy_env[key]:
                 raise ValueError(f"preset field {key!r} of the environment "
                                  f"({conf[key]!r}) differs from the agent's "

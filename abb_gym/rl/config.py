@@ -107,7 +107,7 @@ __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_F
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
-                 "vibration_filter_time", "dwell")
+                 "vibration_filter_time", "dwell", "sync_vibration", "frame_stack")
 ENV_KEYWORDS = ("scene", "preset", "observe_balls")
 ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
