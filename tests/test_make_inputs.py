@@ -482,7 +482,7 @@ def _made_or_named(make, kwargs, vector):
     env.close()
 
 
-@settings(PROPERTY, max_examples=150 * SCALE)
+@settings(PROPERTY, max_examples=400 * SCALE)
 @given(env_id=st.sampled_from(ENV_IDS), kwargs=make_kwargs(vector=False))
 def test_gym_make_gives_an_environment_or_an_error_naming_the_keyword(env_id, kwargs, paths):
     kwargs = _resolve(kwargs, paths)
@@ -492,7 +492,7 @@ def test_gym_make_gives_an_environment_or_an_error_naming_the_keyword(env_id, kw
         _made_or_named(lambda **kw: gym.make(env_id, **kw), kwargs, vector=False)
 
 
-@settings(PROPERTY, max_examples=100 * SCALE)
+@settings(PROPERTY, max_examples=300 * SCALE)
 @given(env_id=st.sampled_from(ENV_IDS), kwargs=make_kwargs(vector=True))
 def test_gym_make_vec_gives_an_environment_or_an_error_naming_the_keyword(env_id, kwargs, paths):
     kwargs = _resolve(kwargs, paths)
