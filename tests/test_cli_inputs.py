@@ -302,6 +302,14 @@ def test_bench_accuracy_needs_at_least_one_repeat():
         refused(["bench", "accuracy", "--repeats", repeats], "--repeats")
 
 
+@pytest.mark.skipif(not HAVE_TRAIN, reason="needs the training extra")
+def test_a_config_file_with_make_vec_keywords_is_refused(stubbed):
+    path = stubbed / "nenv.yml"
+    path.write_text("abb_gym/RunUpSpeed-v0:\n  n_timesteps: 100\n  env_kwargs:\n"
+                    "    num_envs: 3\n")
+    refused(["train", "--config", str(path)], "num_envs")
+
+
 def test_tuning_work_that_cannot_fit_is_refused_before_the_search():
     # --episodes 1e12 built a list of 1e12 episodes for the first candidate; a population
     # beyond the budget is never evaluated

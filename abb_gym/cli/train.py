@@ -72,14 +72,18 @@ def config_from_args(args: argparse.Namespace):
     """The TrainConfig the options describe: the file, then the overrides."""
     from ..configuration import parse_assignments
     from ..rl.config import load_config
+    from . import check_env_kwargs
     cfg = load_config(args.config, args.env)
+    # the config file's environment keywords as well (a TypeError in make_vec otherwise)
+    for key in ("env_kwargs", "eval_env_kwargs"):
+        check_env_kwargs(dict(getattr(cfg, key)), f"--config {args.config}: {key}",
+                         allowed=("scene", "preset", "record_history"))
     changes: dict[str, Any] = parse_assignments(args.hyperparams, "--hyperparams")
     for key in ("n_envs", "eval_freq", "eval_episodes", "checkpoint_freq"):
         if getattr(args, key) is not None:
             changes[key] = getattr(args, key)
     if args.n_timesteps is not None:
         changes["n_timesteps"] = args.n_timesteps
-    from . import check_env_kwargs
     # the environment's own keywords (scene, preset, ...) are welcome; make_vec's are not
     env_kw = check_env_kwargs(parse_assignments(args.env_kwargs, "--env-kwargs"),
                               "--env-kwargs", allowed=("scene", "preset", "record_history"))
