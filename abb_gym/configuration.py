@@ -222,7 +222,7 @@ def build(cls: Any, values: Mapping[str, Any], where: str,
     fields validated (fields without a Spec are passed through)."""
     table = specs(cls)
     valid = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(values) - valid)
+    unknown = sorted(set(values) - valid, key=str)  # a YAML key may be a number or null
     if unknown:
         raise error(f"{where}: unknown field(s) {unknown}; allowed: {sorted(valid)}")
     kwargs = {k: (check(where, k, v, table[k], error) if k in table else v)

@@ -60,9 +60,16 @@ def user_folders() -> list[Path]:
 
 def add_user_folder(folder: str | os.PathLike) -> Path:
     """Search ``folder`` (before the shipped files) for the rest of this process."""
-    path = Path(folder).expanduser()
-    if not path.is_dir():
-        raise ValueError(f"configuration folder {str(folder)!r} is not a directory")
+    text = os.fspath(folder) if isinstance(folder, os.PathLike) else folder
+    if not isinstance(text, str) or not text.strip():  # Path("") is ".", the current folder
+        raise ValueError(f"configuration folder must be a path (got {text!r:.80})")
+    path = Path(text).expanduser()
+    try:
+        is_dir = path.is_dir()
+    except (OSError, ValueError):  # a name the system refuses
+        is_dir = False
+    if not is_dir:
+        raise ValueError(f"configuration folder {text[:200]!r} is not a directory")
     if path not in _EXTRA_USER_FOLDERS:
         _EXTRA_USER_FOLDERS.append(path)
     return path

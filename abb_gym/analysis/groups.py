@@ -6,19 +6,24 @@ by the total mass ``M``.  Their groups, plus three extensions that the shipped s
 ==================  ===========================================================  ============
 group               definition                                                   range
 ==================  ===========================================================  ============
-n_balls             number of balls n                                            >= 1
-eta                 m_b d / (m_d e): one ball's imbalance over the rotor's       > 0
+n_balls             number of balls n                                            1 .. 64
+eta                 m_b d / (m_d e): one ball's imbalance over the rotor's       (0, 1e6]
                     (one number, or one per ball)
-mu                  m_d / M: imbalanced disk mass over the total mass            > 0
-delta               d / e: race radius over the disk eccentricity                > 0
-zeta                C / (2 M w_n): support damping ratio (stationary damper)     >= 0
-zeta_b              C_B / (2 m_b w_n): race damping ratio of a ball (one or      >= 0
+mu                  m_d / M: imbalanced disk mass over the total mass            [1e-6, 1e6]
+delta               d / e: race radius over the disk eccentricity                [1e-6, 1e9]
+zeta                C / (2 M w_n): support damping ratio (stationary damper)     [0, 1e6]
+zeta_b              C_B / (2 m_b w_n): race damping ratio of a ball (one or      [0, 1e6]
                     one per ball); the drag torque is C_B d^2 beta'
-spin                J_b / (m_b r_b^2): rolling-ball spin inertia factor (0 for   >= 0
+spin                J_b / (m_b r_b^2): rolling-ball spin inertia factor (0 for   [0, 1e3]
                     Lu & Hung's point masses, 0.4 for a solid rolling sphere)
-race_eccentricity   E / e: offset of the race centre from the rotor centre       >= 0
-race_angle          gamma [rad]: direction of that offset, from the imbalance    any
+race_eccentricity   E / e: offset of the race centre from the rotor centre       [0, 1e6]
+race_angle          gamma [rad]: direction of that offset, from the imbalance    finite
 ==================  ===========================================================  ============
+
+The ranges keep the linear algebra finite: beyond them (``mu = 5e-324``, ``zeta = 1e308``)
+the eigenvalue problems are singular or overflow, so a group outside its range is a
+ValueError naming it.  The ball count is a scene's (at most 64); the family sampling of
+:func:`abb_gym.analysis.rotating_frame.balanced_family` bounds its work separately.
 
 The speed ratio ``Omega = w / w_n`` is an argument of every analysis, not a group.
 
@@ -48,29 +53,36 @@ from ..physics.scene import Scene
 __all__ = ["Groups", "GROUP_FIELDS"]
 
 # name -> (lower bound, lower bound inclusive, per-ball allowed)
+# group -> (lower bound, lower bound included, upper bound (included), one value per ball)
 _BOUNDS = {
-    "eta": (0.0, False, True),
-    "mu": (0.0, False, False),
-    "delta": (0.0, False, False),
-    "zeta": (0.0, True, False),
-    "zeta_b": (0.0, True, True),
-    "spin": (0.0, True, True),
-    "race_eccentricity": (0.0, True, False),
-    "race_angle": (None, True, False),
+    "eta": (0.0, False, 1e6, True),
+    "mu": (1e-6, True, 1e6, False),
+    "delta": (1e-6, True, 1e9, False),
+    "zeta": (0.0, True, 1e6, False),
+    "zeta_b": (0.0, True, 1e6, True),
+    "spin": (0.0, True, 1e3, True),
+    "race_eccentricity": (0.0, True, 1e6, False),
+    "race_angle": (None, True, None, False),
 }
+MAX_BALLS = 64  # the largest ball_count of a Scene
 GROUP_FIELDS = ("n_balls",) + tuple(_BOUNDS)
 
 
 def _check(name: str, value: Any) -> float:
-    lo, incl, _ = _BOUNDS[name]
+    lo, incl, hi, _ = _BOUNDS[name]
+    if isinstance(value, (bool, np.bool_, bytes)):  # True is not a number here
+        raise ValueError(f"group {name!r} must be a number (got {value!r:.80})")
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"group {name!r} must be a number (got {value!r})") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"group {name!r} must be a number (got {value!r:.80})") from None
     if not math.isfinite(v):
         raise ValueError(f"group {name!r} must be finite (got {v})")
-    if lo is not None and (v < lo or (v == lo and not incl)):
-        raise ValueError(f"group {name!r} must be {'>=' if incl else '>'} {lo:g} (got {v:g})")
+    if (lo is not None and (v < lo or (v == lo and not incl))) or (hi is not None and v > hi):
+        low = "" if lo is None else f"{'>=' if incl else '>'} {lo:g}"
+        high = "" if hi is None else f"<= {hi:g}"
+        raise ValueError(f"group {name!r} must be {' and '.join(t for t in (low, high) if t)} "
+                         f"(got {v:g})")
     return v
 
 
@@ -94,10 +106,12 @@ class Groups:
 
     def __post_init__(self) -> None:
         n = self.n_balls
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"group 'n_balls' must be an integer >= 1 (got {n!r})")
+        if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1 \
+                or n > MAX_BALLS:
+            raise ValueError(f"group 'n_balls' must be an integer in [1, {MAX_BALLS}] (got "
+                             f"{n!r:.80})")
         object.__setattr__(self, "n_balls", int(n))
-        for name, (_, _, per_ball) in _BOUNDS.items():
+        for name, (_, _, _, per_ball) in _BOUNDS.items():
             v = getattr(self, name)
             if per_ball and isinstance(v, (list, tuple, np.ndarray)):
                 vals = tuple(_check(name, x) for x in v)
@@ -148,8 +162,12 @@ class Groups:
         changes = dict(changes)
         if "eta_total" in changes:
             total = _check("eta", changes.pop("eta_total"))
-            n = int(changes.get("n_balls", self.n_balls))
-            changes["eta"] = total / n
+            n = changes.get("n_balls", self.n_balls)
+            # a ball count that is no count (0, 2.5, "x") is refused by __post_init__, naming
+            # it: no int() that truncates, no division by zero here
+            valid = isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_)) \
+                and n >= 1
+            changes["eta"] = total / int(n) if valid else total
         elif "n_balls" in changes and isinstance(self.eta, tuple) and "eta" not in changes:
             raise ValueError("changing 'n_balls' of groups with per-ball eta needs a new 'eta' "
                              "or 'eta_total'")
@@ -188,9 +206,12 @@ class Groups:
         if scene.imbalance <= 0:
             raise ValueError(f"scene {scene.name!r}: field 'rotor_eccentricity' must be > 0 for "
                              f"the Lu & Hung groups (they are relative to the rotor imbalance)")
-        e = scene.rotor_eccentricity if length_scale is None else float(length_scale)
+        try:
+            e = scene.rotor_eccentricity if length_scale is None else float(length_scale)
+        except (TypeError, ValueError, OverflowError):
+            e = math.nan
         if not (math.isfinite(e) and e > 0):
-            raise ValueError(f"length_scale must be > 0 [m] (got {length_scale!r})")
+            raise ValueError(f"length_scale must be > 0 [m] (got {length_scale!r:.80})")
         big_m = scene.total_mass
         k = scene.support_stiffness_x
         wn = math.sqrt(k / big_m)
@@ -199,11 +220,15 @@ class Groups:
         r = scene.race_radius
         eta = tuple(a["ball_mass"] * r / scene.imbalance)
         zeta_b = tuple(a["ball_drag"] / (2.0 * a["ball_mass"] * wn))
-        return cls(eta=eta, n_balls=scene.ball_count, mu=m_d / big_m, delta=r / e,
-                   zeta=scene.support_damping_x / (2.0 * big_m * wn), zeta_b=zeta_b,
-                   spin=tuple(a["ball_inertia_factor"]),
-                   race_eccentricity=scene.race_eccentricity / e,
-                   race_angle=scene.race_eccentricity_angle)
+        try:
+            return cls(eta=eta, n_balls=scene.ball_count, mu=m_d / big_m, delta=r / e,
+                       zeta=scene.support_damping_x / (2.0 * big_m * wn), zeta_b=zeta_b,
+                       spin=tuple(a["ball_inertia_factor"]),
+                       race_eccentricity=scene.race_eccentricity / e,
+                       race_angle=scene.race_eccentricity_angle)
+        except ValueError as exc:  # a group out of its range: say where it came from
+            raise ValueError(f"scene {scene.name!r} with length_scale e = {e:g} m: {exc}") \
+                from None
 
     @classmethod
     def from_rezaee_fathi(cls, mbar: float, epsbar: float, zeta: float, beta: float,

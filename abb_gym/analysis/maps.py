@@ -37,11 +37,16 @@ import numpy as np
 
 from ..execution import Executor
 from ..physics.scene import Scene
-from .groups import GROUP_FIELDS, Groups
-from .rotating_frame import DEFAULT_TOL, _check_omega, family_stability
+from .groups import GROUP_FIELDS, MAX_BALLS, Groups
+from .rotating_frame import DEFAULT_TOL, _check_omega, check_family_size, family_stability
 
-__all__ = ["StabilityMap", "stability_map", "resolve_groups", "onset_speed", "MAP_FIELDS"]
+__all__ = ["StabilityMap", "stability_map", "resolve_groups", "onset_speed", "MAP_FIELDS",
+           "MAX_MAP_TASKS", "check_map_size"]
 
+#: Most tasks (grid points x ball counts) of one map: the task list is built before anything
+#: runs (a 1e9-point grid would hang there, and its arrays take gigabytes); a default map has
+#: 30 x 60 x 3 = 5400.
+MAX_MAP_TASKS = 10 ** 6
 MAP_FIELDS = ("exists", "union_stable", "all_stable", "fraction_stable", "best", "worst")
 _GROUP_AXES = set(GROUP_FIELDS) | {"eta_total"}
 
@@ -171,6 +176,25 @@ def _values(name: str, values: Sequence[float]) -> np.ndarray:
     return arr
 
 
+def check_map_size(nx: int, ny: int, n_balls: Sequence[int], n_members: int,
+                   names: tuple[str, str, str, str] = ("x", "y", "n_balls", "n_members")
+                   ) -> None:
+    """Raise ValueError, naming the argument (``names``: how the caller calls the grid sizes,
+    the ball counts and the members), for a map larger than :data:`MAX_MAP_TASKS` tasks or
+    a family sampling beyond :data:`~abb_gym.analysis.rotating_frame.MAX_FAMILY_CANDIDATES`
+    (checked before any grid is built)."""
+    tasks = float(nx) * float(ny) * max(1, len(n_balls))
+    if tasks > MAX_MAP_TASKS:
+        raise ValueError(f"{names[0]} x {names[1]} x {names[2]} = {nx} x {ny} x {len(n_balls)} "
+                         f"= {tasks:.3g} map tasks; at most {MAX_MAP_TASKS:.0e}: use fewer "
+                         f"points or ball counts")
+    for n in n_balls:
+        try:
+            check_family_size(int(n), n_members)
+        except ValueError as exc:
+            raise ValueError(f"{names[3]}: {exc}") from None
+
+
 def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
                   y: tuple[str, Sequence[float]], *, n_balls: Sequence[int] | None = None,
                   omega: float = 2.0, n_members: int = 13, tol: float = DEFAULT_TOL,
@@ -215,9 +239,16 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     g0, _ = resolve_groups(base, {}, length_scale)
     if n_balls is None:
         n_balls = tuple(dict.fromkeys([g0.n_balls, 3, 2]))
+    if isinstance(n_balls, (str, bytes)) or not all(
+            isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_))
+            for n in n_balls):
+        raise ValueError(f"n_balls must be ball counts, integers in [1, {MAX_BALLS}] (got "
+                         f"{n_balls!r:.80})")
     n_balls = tuple(int(n) for n in n_balls)
-    if not n_balls or any(n < 1 for n in n_balls):
-        raise ValueError(f"n_balls must be integers >= 1 (got {n_balls})")
+    if not n_balls or any(n < 1 or n > MAX_BALLS for n in n_balls):
+        raise ValueError(f"n_balls must be ball counts, integers in [1, {MAX_BALLS}] (got "
+                         f"{n_balls})")
+    check_map_size(len(xv), len(yv), n_balls, n_members)
     tasks = []
     for yval in yv:
         for xval in xv:

@@ -55,7 +55,8 @@ from .groups import Groups
 
 __all__ = ["Equilibrium", "FamilyStability", "coefficients", "residual", "jacobian",
            "eigenvalues", "unbalanced_equilibria", "balanced_target", "balanced_family",
-           "family_stability", "equilibria", "rhs", "as_groups", "DEFAULT_TOL"]
+           "family_stability", "equilibria", "rhs", "as_groups", "DEFAULT_TOL", "OMEGA_RANGE",
+           "MAX_FAMILY_CANDIDATES", "family_candidates", "check_family_size"]
 
 DEFAULT_TOL = 1e-9
 
@@ -69,10 +70,20 @@ def as_groups(system: Groups | Scene, length_scale: float | None = None) -> Grou
     raise ValueError(f"system must be Groups or Scene (got {type(system).__name__})")
 
 
+#: Range of the speed ratio Omega = w / w_n: beyond it (5e-324, 1e308) the eigenvalue problems
+#: divide by zero or overflow (the groups have ranges for the same reason, :mod:`.groups`).
+OMEGA_RANGE = (1e-3, 1e3)
+
+
 def _check_omega(omega: float) -> float:
-    om = float(omega)
-    if not (math.isfinite(om) and om > 0):
-        raise ValueError(f"Omega (speed ratio w/w_n) must be > 0 (got {omega!r})")
+    try:
+        om = math.nan if isinstance(omega, (bool, str, bytes)) else float(omega)
+    except (TypeError, ValueError, OverflowError):
+        om = math.nan
+    lo, hi = OMEGA_RANGE
+    if not (math.isfinite(om) and lo <= om <= hi):
+        raise ValueError(f"Omega (speed ratio w/w_n) must be in [{lo:g}, {hi:g}] (got "
+                         f"{omega!r:.80})")
     return om
 
 
@@ -371,6 +382,35 @@ def _two_ball(a1: float, a2: float, target: complex, sign: int):
     return psi + sign * g1, psi - sign * g2
 
 
+#: Most candidate members :func:`balanced_family` samples per call: ``n_members ** (n - 2)``
+#: for n >= 4 balls grows without bound (13 members and 8 balls: 4.8e6 candidates, a minute;
+#: 2 members and 32 balls: 1e9, hours), so larger requests are refused up front.
+MAX_FAMILY_CANDIDATES = 10 ** 6
+
+
+def family_candidates(n_balls: int, n_members: int) -> float:
+    """Candidate members :func:`balanced_family` samples for ``n_balls`` balls and
+    ``n_members`` (a float: it may be astronomically large)."""
+    if n_balls <= 2:
+        return 1.0
+    return float(n_members) ** max(1, n_balls - 2)
+
+
+def check_family_size(n_balls: int, n_members: int) -> None:
+    """Raise ValueError naming ``n_members`` and ``n_balls`` if the family sampling would take
+    more than :data:`MAX_FAMILY_CANDIDATES` candidates."""
+    if isinstance(n_members, (bool, np.bool_)) or not isinstance(n_members, (int, np.integer)) \
+            or n_members < 1:
+        raise ValueError(f"n_members must be an integer >= 1 (got {n_members!r:.80})")
+    count = family_candidates(n_balls, n_members)
+    if count > MAX_FAMILY_CANDIDATES:
+        largest = int(MAX_FAMILY_CANDIDATES ** (1.0 / max(1, n_balls - 2)))
+        raise ValueError(f"n_members = {n_members} with n_balls = {n_balls} samples "
+                         f"{count:.3g} candidate members ({n_members}^{max(1, n_balls - 2)}); "
+                         f"at most {MAX_FAMILY_CANDIDATES:.0e}: use n_members <= {largest} or "
+                         f"fewer balls")
+
+
 def balanced_family(system: Groups | Scene, omega: float, n_members: int = 13
                     ) -> np.ndarray:
     """Members of the balanced family, shape (k, n) ball angles [rad] (k may be 0).
@@ -386,8 +426,7 @@ def balanced_family(system: Groups | Scene, omega: float, n_members: int = 13
     g = as_groups(system)
     c = coefficients(g)
     n = g.n_balls
-    if n_members < 1:
-        raise ValueError(f"n_members must be >= 1 (got {n_members})")
+    check_family_size(n, n_members)
     t = balanced_target(g, omega)
     a = c.a
     signs = (1,) if g.identical_balls else (1, -1)

@@ -15,7 +15,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
+
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|infinity|nan)$",
+                             re.IGNORECASE)
 
 SUBCOMMANDS = [
     "abb_gym.cli.simulate",
@@ -29,6 +33,23 @@ SUBCOMMANDS = [
     "abb_gym.cli.kernels",
     "abb_gym.cli.render",
 ]
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line on stderr and exit 2, like every
+    other error of ``abb-gym`` (argparse prints the whole usage first, a dozen lines for
+    ``simulate``); the line says where the usage is.  Subcommand parsers inherit it.
+
+    Negative numbers in any float notation are values, not options: argparse (before Python
+    3.13) reads ``--ball-angles-deg 0 -1e-3`` or ``--dwell-accel -inf`` as an unknown option
+    ``-1e-3`` (no option of abb-gym looks like a number)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (usage: {self.prog} --help)\n")
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -55,7 +76,7 @@ def _with_defaults(parser: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="abb-gym", description="Automatic ball balancer simulator and Gymnasium suite")
     parser.add_argument("--version", action="version", version=f"abb-gym {__version__}")
     parser.add_argument("--configs", action="append", default=[], metavar="DIR",
@@ -67,6 +88,26 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module(name).register(sub)
     _with_defaults(parser)
     return parser
+
+
+#: keywords of ``gym.make_vec`` itself and those the sweep commands set: never
+#: ``--env-kwargs`` entries (a duplicate keyword would be a TypeError deep in a task)
+RESERVED_ENV_KWARGS = {"id": None, "num_envs": None, "vectorization_mode": None,
+                       "vector_kwargs": None, "wrappers": None, "record_history": None,
+                       "scene": "--scene", "preset": "--preset"}
+
+
+def check_env_kwargs(env_kwargs: dict, option: str, allowed: tuple = ()) -> dict:
+    """``env_kwargs`` (from ``option``) without the keywords the command sets itself
+    (:data:`RESERVED_ENV_KWARGS`, less ``allowed``): those raise ValueError naming them."""
+    for key in env_kwargs:
+        if key in RESERVED_ENV_KWARGS and key not in allowed:
+            use = RESERVED_ENV_KWARGS[key]
+            raise ValueError(f"{option} {key}: set by the command itself"
+                             + (f"; use {use}" if use else "") + " (an environment keyword "
+                             "such as control_interval=0.02 or 'reward={residual: 4}' goes "
+                             "here)")
+    return env_kwargs
 
 
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by it
@@ -97,7 +138,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from .. import resources
         for folder in args.configs:
-            resources.add_user_folder(folder)
+            try:
+                resources.add_user_folder(folder)
+            except ValueError as exc:
+                raise ValueError(f"--configs: {exc}") from None
         code = int(args.func(args) or 0)
         # flush here, inside the try: a closed pipe then surfaces now, not at exit
         sys.stdout.flush()

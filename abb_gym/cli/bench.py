@@ -34,6 +34,8 @@ def _write_csv(rows, path: Path) -> None:
 
 def run_accuracy(args) -> int:
     from ..benchmarks.accuracy import energy_drift, plot_work_precision, run_accuracy as bench
+    if args.repeats < 1:  # "best of 0" has no best
+        raise ValueError(f"--repeats must be >= 1 (got {args.repeats})")
     out = output_folder(args.out, "--out")
     rows = bench(repeats=args.repeats)
     png = plot_work_precision(rows, out / "work_precision.png")

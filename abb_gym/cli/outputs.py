@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["output_file", "output_folder"]
+__all__ = ["output_file", "output_folder", "output_image"]
 
 
 def _blocking_file(path: Path) -> Path | None:
@@ -36,10 +36,33 @@ def _make_folder(folder: Path, option: str, target: Path) -> None:
                          f"writable")
 
 
-def output_file(path: str | os.PathLike, option: str) -> Path:
-    """``path`` as a file to be written later: its folder exists (created) and is writable,
-    and ``path`` is not a folder.  ``option`` names the option in the message (``--json``)."""
-    p = Path(path)
+def _path(path: str | os.PathLike, option: str) -> Path:
+    """``path`` as a Path; an empty or blank name (which ``Path`` reads as ".", the current
+    folder) and names the system refuses (a NUL byte, too long) raise ValueError naming
+    ``option``."""
+    text = os.fspath(path) if isinstance(path, os.PathLike) else path
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError(f"{option} must be a path (got {text!r:.80})")
+    if "\x00" in text:  # Path.exists() says False for it; open() would raise later
+        raise ValueError(f"{option} {text[:200]!r}: not a usable path (a NUL character)")
+    p = Path(text)
+    try:
+        p.exists()
+    except (OSError, ValueError) as exc:  # a name too long
+        raise ValueError(f"{option} {text[:200]!r}: not a usable path "
+                         f"({getattr(exc, 'strerror', None) or exc})") from None
+    return p
+
+
+def _checked(make, path, option: str) -> Path:
+    try:
+        return make(_path(path, option), option)
+    except OSError as exc:  # a name the system refuses further up (too long, a loop)
+        raise ValueError(f"{option} {str(path)[:200]!r}: not a usable path "
+                         f"({exc.strerror or exc})") from None
+
+
+def _file(p: Path, option: str) -> Path:
     if p.is_dir():
         raise ValueError(f"{option} {str(p)!r} is a folder; give a file name")
     if p.exists() and not os.access(p, os.W_OK):
@@ -48,11 +71,35 @@ def output_file(path: str | os.PathLike, option: str) -> Path:
     return p
 
 
-def output_folder(path: str | os.PathLike, option: str) -> Path:
-    """``path`` as a folder that files will be written into: created if missing; a regular
-    file there or above it is refused."""
-    p = Path(path)
+def _folder(p: Path, option: str) -> Path:
     if p.exists() and not p.is_dir():
         raise ValueError(f"{option} {str(p)!r} is a file, not a folder")
     _make_folder(p, option, p)
+    return p
+
+
+def output_file(path: str | os.PathLike, option: str) -> Path:
+    """``path`` as a file to be written later: its folder exists (created) and is writable,
+    and ``path`` is not a folder nor empty.  ``option`` names the option in the message
+    (``--json``)."""
+    return _checked(_file, path, option)
+
+
+def output_folder(path: str | os.PathLike, option: str) -> Path:
+    """``path`` as a folder that files will be written into: created if missing; a regular
+    file there or above it, and an empty name (not the current folder), are refused."""
+    return _checked(_folder, path, option)
+
+
+def output_image(path: str | os.PathLike, option: str) -> Path:
+    """:func:`output_file` for a figure: the suffix must be a format matplotlib writes (none
+    means PNG), checked before the run rather than when the figure is saved after it."""
+    p = output_file(path, option)
+    suffix = p.suffix[1:].lower()
+    if suffix:
+        from matplotlib.backend_bases import FigureCanvasBase
+        formats = FigureCanvasBase.get_supported_filetypes()
+        if suffix not in formats:
+            raise ValueError(f"{option} {str(p)!r}: matplotlib cannot write {suffix!r} files; "
+                             f"use one of {', '.join(sorted(formats))}")
     return p

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from ..physics import MotorDrive, SpeedProfile, load_scene, simulate
+from ..physics.scene import ANGLE_LIMIT
 from ..physics.simulate import METHODS
 from ..tables import markdown_table
 
@@ -29,17 +30,25 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="simulate one run and print/plot it",
                        description=__doc__)
     add_scene_arguments(p)
-    p.add_argument("--profile", choices=["ramp", "dwell", "constant"], default="ramp",
-                   help="prescribed speed profile (ignored with --motor-torque/--limited-power)")
-    p.add_argument("--accel", type=float, default=40.0, help="run-up acceleration [rad/s^2]")
+    # the drive options default to None, so that one given for another drive is refused
+    # (build_drive) instead of silently ignored; the defaults below are filled in there
+    p.add_argument("--profile", choices=["ramp", "dwell", "constant"], default=None,
+                   help="prescribed speed profile (default ramp; not with --motor-torque or "
+                        "--limited-power)")
+    p.add_argument("--accel", type=float, default=None,
+                   help=f"run-up acceleration of ramp and dwell [rad/s^2] (default "
+                        f"{DEFAULTS['accel']:g})")
     p.add_argument("--dwell-speed", type=float, default=None,
                    help="dwell start speed [rad/s] (default: the scene's critical speed)")
-    p.add_argument("--dwell-time", type=float, default=0.5, help="dwell length [s]")
-    p.add_argument("--dwell-accel", type=float, default=0.0,
-                   help="acceleration during the dwell [rad/s^2] (0: constant speed)")
+    p.add_argument("--dwell-time", type=float, default=None,
+                   help=f"dwell length [s] (default {DEFAULTS['dwell_time']:g})")
+    p.add_argument("--dwell-accel", type=float, default=None,
+                   help="acceleration during the dwell [rad/s^2] (default 0: constant speed)")
     p.add_argument("--operating-speed", type=float, default=None,
-                   help="hold speed [rad/s] (default: keep accelerating)")
-    p.add_argument("--speed", type=float, default=None, help="speed of --profile constant [rad/s]")
+                   help="hold speed of ramp and dwell [rad/s] (default: keep accelerating)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="speed of --profile constant, target of --limited-power [rad/s] "
+                        "(default: the scene's operating speed)")
     p.add_argument("--motor-torque", type=float, default=None,
                    help="drive the rotor with a constant motor torque [N m] instead")
     p.add_argument("--limited-power", type=float, default=None, metavar="GAIN",
@@ -59,42 +68,108 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def build_drive(args, scene):
+DEFAULTS = {"accel": 40.0, "dwell_time": 0.5, "dwell_accel": 0.0}
+# the options each drive reads (any other drive option given with it is refused)
+DRIVE_OPTIONS = {
+    "motor": ("motor_torque",),
+    "limited-power": ("limited_power", "speed"),
+    "constant": ("profile", "speed"),
+    "ramp": ("profile", "accel", "operating_speed"),
+    "dwell": ("profile", "accel", "dwell_speed", "dwell_time", "dwell_accel",
+              "operating_speed"),
+}
+
+
+def _drive_kind(args) -> str:
     if args.motor_torque is not None:
-        return MotorDrive.constant_torque(args.motor_torque)
+        return "motor"
     if args.limited_power is not None:
+        return "limited-power"
+    return args.profile or "ramp"
+
+
+def check_drive_options(args) -> str:
+    """The drive the options select; an option the drive would ignore (``--speed`` with a
+    ramp, ``--profile`` with ``--motor-torque``, both motors) is a ValueError naming it."""
+    kind = _drive_kind(args)
+    used = DRIVE_OPTIONS[kind]
+    for name in ("motor_torque", "limited_power", "profile", "accel", "dwell_speed",
+                 "dwell_time", "dwell_accel", "operating_speed", "speed"):
+        if getattr(args, name) is not None and name not in used:
+            option = "--" + name.replace("_", "-")
+            drive = {"motor": "--motor-torque", "limited-power": "--limited-power"}.get(
+                kind, f"--profile {kind}")
+            raise ValueError(f"{option} does not apply to {drive} (it would be ignored); "
+                             f"that drive takes "
+                             f"{', '.join('--' + u.replace('_', '-') for u in used)}")
+    for name, value in DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    return kind
+
+
+def build_drive(args, scene):
+    """The drive the options describe; a rejected value names the options it came from (the
+    API's message names its own argument: ``torque`` for ``--motor-torque``)."""
+    check_drive_options(args)
+    if args.motor_torque is not None:
+        options, make = "--motor-torque", lambda: MotorDrive.constant_torque(args.motor_torque)
+    elif args.limited_power is not None:
         target = args.speed if args.speed is not None else scene.drive_operating_speed
-        return MotorDrive.limited_power(args.limited_power, target)
-    if args.profile == "constant":
-        return SpeedProfile.constant(args.speed if args.speed is not None
-                                     else scene.drive_operating_speed)
-    if args.profile == "dwell":
+        options = "--limited-power/--speed"
+        make = lambda: MotorDrive.limited_power(args.limited_power, target)  # noqa: E731
+    elif _drive_kind(args) == "constant":
+        options = "--speed"
+        make = lambda: SpeedProfile.constant(  # noqa: E731
+            args.speed if args.speed is not None else scene.drive_operating_speed)
+    elif _drive_kind(args) == "dwell":
         dwell_speed = scene.critical_speed if args.dwell_speed is None else args.dwell_speed
-        return SpeedProfile.dwell(args.accel, dwell_speed, args.dwell_time, args.dwell_accel,
-                                  args.operating_speed)
-    return SpeedProfile.ramp(args.accel, args.operating_speed)
+        options = "--accel/--dwell-speed/--dwell-time/--dwell-accel/--operating-speed"
+        make = lambda: SpeedProfile.dwell(args.accel, dwell_speed, args.dwell_time,  # noqa
+                                          args.dwell_accel, args.operating_speed)
+    else:
+        options = "--accel/--operating-speed"
+        make = lambda: SpeedProfile.ramp(args.accel, args.operating_speed)  # noqa: E731
+    try:
+        return make()
+    except ValueError as exc:
+        raise ValueError(f"{options}: {exc}") from None
+
+
+def ball_angles(args, scene):
+    """``--ball-angles-deg`` in radians, checked in the option's own unit and words."""
+    if args.ball_angles_deg is None:
+        return None
+    deg = np.asarray(args.ball_angles_deg, float)
+    limit = np.degrees(ANGLE_LIMIT)
+    if deg.shape != (scene.ball_count,) or not np.all(np.abs(deg) <= limit):
+        raise ValueError(f"--ball-angles-deg must be {scene.ball_count} finite angles (one per "
+                         f"ball of {scene.name!r}) in [-{limit:.6g}, {limit:.6g}] deg (got "
+                         f"{' '.join(f'{v:g}' for v in args.ball_angles_deg[:8])})")
+    return np.radians(deg)
 
 
 def run(args) -> int:
-    from .outputs import output_file
+    from .outputs import output_file, output_image
     scene = load_scene(args.scene, **parse_overrides(args.set))
     drive = build_drive(args, scene)
-    # after the inputs (no folders for a rejected command), before the run
-    if args.plot:
-        output_file(args.plot, "--plot")
-    if args.json and args.json != "-":
+    angles = ball_angles(args, scene)
+    # after the inputs (no folders for a rejected command), before the run; an empty path is
+    # refused, not read as "no --plot"
+    if args.plot is not None:
+        output_image(args.plot, "--plot")
+    if args.json is not None and args.json != "-":
         output_file(args.json, "--json")
-    angles = None if args.ball_angles_deg is None else np.radians(args.ball_angles_deg)
     tr = simulate(scene, drive, args.t_end, ball_angles0=angles, method=args.method, dt=args.dt,
                   output_dt=args.output_dt)
-    if args.plot:
+    if args.plot is not None:
         from ..plots import plot_runup
         plot_runup(tr, args.plot)
     if args.json == "-":
         json.dump(tr.to_dict(), sys.stdout)
         print()
         return 0
-    if args.json:
+    if args.json is not None:
         tr.to_json(args.json)
     print(markdown_table([tr.summary()]))
     return 0

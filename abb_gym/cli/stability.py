@@ -18,6 +18,8 @@ interrupted map resumes.
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
 
 import numpy as np
 
@@ -56,7 +58,8 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..analysis import Groups, stability_map
-    from ..analysis.groups import GROUP_FIELDS
+    from ..analysis.groups import GROUP_FIELDS, MAX_BALLS
+    from ..analysis.rotating_frame import OMEGA_RANGE
     from ..physics.scene import load_scene
     from .outputs import output_file
 
@@ -69,10 +72,15 @@ def run(args: argparse.Namespace) -> int:
                           ("--omega", [args.omega])):
         if not all(np.isfinite(values)):
             raise ValueError(f"{label} must be finite (got {' '.join(map(str, values))})")
-    if not args.omega > 0:
-        raise ValueError(f"--omega must be > 0 (got {args.omega})")
-    if args.balls is not None and any(n < 1 for n in args.balls):
-        raise ValueError(f"--balls must be ball counts >= 1 (got {args.balls})")
+    lo, hi = OMEGA_RANGE
+    if not lo <= args.omega <= hi:
+        raise ValueError(f"--omega must be in [{lo:g}, {hi:g}] (got {args.omega})")
+    name = Path(args.out).name
+    if not args.out.strip() or args.out.endswith(("/", os.sep)) or name in ("", ".", ".."):
+        raise ValueError(f"--out must be a file path without suffix (<out>.csv and <out>.png "
+                         f"are written; got {args.out!r})")
+    if args.balls is not None and any(not 1 <= n <= MAX_BALLS for n in args.balls):
+        raise ValueError(f"--balls must be ball counts in [1, {MAX_BALLS}] (got {args.balls})")
     if args.length_scale is not None and not (np.isfinite(args.length_scale)
                                               and args.length_scale > 0):
         raise ValueError(f"--length-scale must be a finite length > 0 [m] "
@@ -83,30 +91,42 @@ def run(args: argparse.Namespace) -> int:
     from ..configuration import parse_assignments
     settings = parse_assignments(args.set, "--set")
     group_keys = set(GROUP_FIELDS) | {"eta_total"}
+    # ball counts written 3.0 are 3; 2.5, 1e400 or [1] go to the validators, which name them
+    # (int() would truncate 2.5 to 2 silently, or raise OverflowError or TypeError)
+    for key in ("ball_count", "n_balls"):
+        if isinstance(settings.get(key), float) and settings[key].is_integer():
+            settings[key] = int(settings[key])
     if args.scene is not None:
         scene_set = {k: v for k, v in settings.items() if k not in group_keys}
-        if "ball_count" in scene_set:
-            scene_set["ball_count"] = int(scene_set["ball_count"])
         base = load_scene(args.scene, **scene_set)
         group_set = {k: v for k, v in settings.items() if k in group_keys}
         if group_set:
             g = Groups.from_scene(base, args.length_scale)
-            if "n_balls" in group_set:
-                group_set["n_balls"] = int(group_set["n_balls"])
             base = g.replace(**group_set)
     else:
         unknown = sorted(set(settings) - group_keys)
         if unknown:
             raise ValueError(f"--set {unknown}: not a group; allowed {sorted(group_keys)} "
                              f"(scene fields need --scene)")
-        if "n_balls" in settings:
-            settings["n_balls"] = int(settings["n_balls"])
         base = Groups().replace(**settings) if settings else Groups()
     # the axis names and the grid's corners, as stability_map resolves every point
-    from ..analysis.maps import resolve_groups
+    from ..analysis.maps import check_map_size, resolve_groups
+    from ..analysis.rotating_frame import _check_omega
+    corner_balls = []
     for xv in args.x_range:
         for yv in args.y_range:
-            resolve_groups(base, {args.x: xv, args.y: yv}, args.length_scale)
+            g, om = resolve_groups(base, {args.x: xv, args.y: yv}, args.length_scale)
+            if om is not None:
+                _check_omega(om)
+            corner_balls.append(g.n_balls)  # an n_balls axis has its largest at a corner
+    # the size of the work, before any grid is built (a 1e9-point axis would take minutes
+    # and gigabytes before the first task)
+    g0, _ = resolve_groups(base, {}, args.length_scale)
+    balls = args.balls or list(dict.fromkeys([g0.n_balls, 3, 2]))
+    check_map_size(1, 1, corner_balls, args.members,
+                   names=("--nx", "--ny", "--balls", "--members"))
+    check_map_size(args.nx, args.ny, balls, args.members,
+                   names=("--nx", "--ny", "--balls", "--members"))
     # after the inputs (no folders for a rejected command), before any point is computed
     for suffix in (".csv", ".png"):
         output_file(f"{args.out}{suffix}", "--out")

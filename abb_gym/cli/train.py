@@ -14,6 +14,7 @@ wall time and env-steps/s (see :mod:`abb_gym.rl.train`).  Needs the training ext
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -71,14 +72,21 @@ def config_from_args(args: argparse.Namespace):
     """The TrainConfig the options describe: the file, then the overrides."""
     from ..configuration import parse_assignments
     from ..rl.config import load_config
+    from . import check_env_kwargs
     cfg = load_config(args.config, args.env)
+    # the config file's environment keywords as well (a TypeError in make_vec otherwise)
+    for key in ("env_kwargs", "eval_env_kwargs"):
+        check_env_kwargs(dict(getattr(cfg, key)), f"--config {args.config}: {key}",
+                         allowed=("scene", "preset", "record_history"))
     changes: dict[str, Any] = parse_assignments(args.hyperparams, "--hyperparams")
     for key in ("n_envs", "eval_freq", "eval_episodes", "checkpoint_freq"):
         if getattr(args, key) is not None:
             changes[key] = getattr(args, key)
     if args.n_timesteps is not None:
         changes["n_timesteps"] = args.n_timesteps
-    env_kw = parse_assignments(args.env_kwargs, "--env-kwargs")
+    # the environment's own keywords (scene, preset, ...) are welcome; make_vec's are not
+    env_kw = check_env_kwargs(parse_assignments(args.env_kwargs, "--env-kwargs"),
+                              "--env-kwargs", allowed=("scene", "preset", "record_history"))
     if env_kw:
         changes["env_kwargs"] = env_kw
     return cfg.with_overrides(**changes) if changes else cfg
@@ -92,6 +100,8 @@ def _report(res) -> None:
     if s:
         def fmt(key: str, digits: int = 3) -> str:
             m = s[key]
+            if not all(math.isfinite(m[k]) for k in ("mean", "ci_low", "ci_high")):
+                return "n/a (no episode settled)"  # a mean over no episodes, not "nan"
             return (f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, "
                     f"{m['ci_high']:.{digits}f}]")
         print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
@@ -104,16 +114,18 @@ def run_from_args(args: argparse.Namespace) -> int:
     from ..rl.train import default_run_dir, seeded_trial, train
     from .outputs import output_folder
     cfg = config_from_args(args)
-    if args.out:
+    if args.out is not None:  # "" is refused, not read as "no --out" (nor as ".")
         output_folder(args.out, "--out")
+    if args.tensorboard_log is not None:
+        output_folder(args.tensorboard_log, "--tensorboard-log")
     if args.seeds is None:
         res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
                     verbose=args.verbose, tensorboard_log=args.tensorboard_log)
         _report(res)
         return 0
     seeds = list(dict.fromkeys(args.seeds))
-    root = Path(args.out) if args.out else default_run_dir(cfg, 0).parent / time.strftime(
-        "seeds-%Y%m%d-%H%M%S")
+    root = Path(args.out) if args.out is not None else \
+        default_run_dir(cfg, 0).parent / time.strftime("seeds-%Y%m%d-%H%M%S")
     if args.ray or args.ray_address:
         from ..execution.tune import grid, run_trials
         space = {"env_id": cfg.env_id, "hyperparams": cfg.to_mapping(),
@@ -150,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``agents/train.py``: the options of ``abb-gym train`` as a script."""
-    p = argparse.ArgumentParser(prog="train", description=__doc__.split("\n")[0])
+    from . import ArgumentParser
+    p = ArgumentParser(prog="train", description=__doc__.split("\n")[0])
     add_train_arguments(p)
     args = p.parse_args(argv)
     try:

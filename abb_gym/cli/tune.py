@@ -47,6 +47,22 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _check_episode_memory(args, env_kwargs) -> None:
+    """The episodes of one candidate run as the sub-environments of one vector environment
+    with their histories: ``--episodes 1e12`` would fill the memory (or hang building the
+    episode list) long before the first candidate; refused here, naming the option."""
+    from ..envs.setup import check_memory
+    from ..evaluation.evaluate import make_env
+    env = make_env(args.env, args.scene, args.preset, 1, **env_kwargs)
+    try:
+        check_memory(env.unwrapped.setup, args.episodes, args.episodes)
+    except ValueError as exc:
+        raise ValueError(f"--episodes {args.episodes}: the episodes of one candidate run as "
+                         f"one vector environment; {exc}") from None
+    finally:
+        env.close()
+
+
 def run(args) -> int:
     import yaml
     from ..baselines.tuner import tune
@@ -54,18 +70,26 @@ def run(args) -> int:
     for name in ("budget", "episodes"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1 (got {getattr(args, name)})")
-    if args.popsize is not None and args.popsize < 2:
-        raise ValueError(f"--popsize must be >= 2 (got {args.popsize})")
+    if args.popsize is not None and not 2 <= args.popsize <= args.budget:
+        # a population beyond the budget is never evaluated (and 1e12 would not fit)
+        raise ValueError(f"--popsize must be >= 2 and <= --budget = {args.budget} (got "
+                         f"{args.popsize})")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0 (got {args.seed})")
     from ..baselines.tuner import check_tuned_path, tuned_path
     from ..configuration import parse_assignments
     from ..evaluation.evaluate import check_inputs
+    from . import check_env_kwargs
     load_scene(args.scene)
-    env_kwargs = parse_assignments(args.env_kwargs, "--env-kwargs")
+    env_kwargs = check_env_kwargs(parse_assignments(args.env_kwargs, "--env-kwargs"),
+                                  "--env-kwargs")
     # the environment every task makes, once here (preset, keywords, stiffness)
     check_inputs(args.env, args.scene, args.preset, args.seed, **env_kwargs)
-    out = None if args.dry_run else (args.out or f"baselines/{args.scene}.yaml")
+    _check_episode_memory(args, env_kwargs)
+    if args.out is not None and not args.out.strip():  # not read as "no --out"
+        raise ValueError(f"--out must be a file or folder path (got {args.out!r})")
+    out = None if args.dry_run else (f"baselines/{args.scene}.yaml" if args.out is None
+                                     else args.out)
     if out is not None:
         from .outputs import output_file
         target = tuned_path(out, args.scene)

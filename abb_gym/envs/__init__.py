@@ -89,19 +89,22 @@ def episode_steps(env_id: str = "abb_gym/RunUpSpeed-v0", **kwargs) -> int:
     """Steps of one episode of ``env_id`` made with ``kwargs`` (scene, preset, overrides):
     ``env.spec.max_episode_steps`` of ``gym.make(env_id, **kwargs)`` without building the
     environment's buffers.  Each step is one control interval [s] (DwellProfile: one step)."""
-    from .setup import EnvSetup
+    from .info import check_display
+    from .setup import EnvSetup, check_flag
     kinds = {"abb_gym/RunUpTorque-v0": "torque", "abb_gym/RunUpSpeed-v0": "speed",
              "abb_gym/DwellProfile-v0": "dwell"}
-    if env_id not in kinds:
-        raise ValueError(f"env_id must be one of {list(kinds)} (got {env_id!r})")
+    if not isinstance(env_id, str) or env_id not in kinds:
+        raise ValueError(f"env_id must be one of {list(kinds)} (got {env_id!r:.80})")
+    kw = dict(kwargs)
+    # no effect on the length, but checked as gym.make checks them: a keyword gym.make
+    # refuses is refused here too, never silently ignored
+    check_display(kw.pop("render_mode", None), BalancerEnv.metadata["render_modes"],
+                  kw.pop("info_level", "lean"))
+    check_flag(kw.pop("record_history", False), "record_history")
+    setup = EnvSetup(kinds[env_id], kw.pop("scene", "yoshida_odd"), kw.pop("preset", "train"),
+                     kw.pop("observe_balls", False), kw.pop("max_episode_steps", None), kw)
     if kinds[env_id] == "dwell":
         return 1
-    kw = dict(kwargs)
-    for key in ("render_mode", "record_history", "info_level"):  # no effect on the length
-        kw.pop(key, None)
-    setup = EnvSetup(kinds[env_id], kw.pop("scene", "yoshida_odd"), kw.pop("preset", "train"),
-                     bool(kw.pop("observe_balls", False)), kw.pop("max_episode_steps", None),
-                     kw)
     return setup.max_steps if setup.backstop <= 0 else min(setup.max_steps, setup.backstop)
 
 

@@ -102,6 +102,9 @@ class ActionModel:
         """Largest rotor speed [rad/s] an episode can reach (it sizes the integration step)."""
         return operating_speed
 
+    #: :meth:`default_episode_length` in words (for messages)
+    episode_length_rule = "2.5 operating_speed / drive_max_acceleration + settle_time"
+
     def default_episode_length(self, setup: Any) -> float:
         """Episode length [s] when the preset leaves it automatic."""
         return 2.5 * setup.reference_time + setup.config.settle_time
@@ -164,6 +167,10 @@ class DwellAction(ActionModel):
     n_actions = 3
     n_rows = 4  # ramp, dwell, ramp, hold
 
+    episode_length_rule = ("(1 + dwell.time_range[1] max(0, 1 - dwell.accel_range[0])) "
+                           "operating_speed / (dwell.runup_acceleration drive_max_acceleration)"
+                           " + settle_time + 2 control_interval")
+
     def default_episode_length(self, setup):
         # the slowest profile: the longest dwell at the lowest dwell acceleration
         dw = setup.config.dwell
@@ -181,8 +188,8 @@ class DwellAction(ActionModel):
         wc = setup.scene.critical_speed
         if dw.speed_range[0] * wc > setup.operating_speed:
             raise PresetError(f"environment preset {setup.config.name!r}: field "
-                              f"'dwell.speed_range' starts above the operating speed "
-                              f"({dw.speed_range[0]:g} x {wc:.4g} rad/s > "
+                              f"'dwell.speed_range' starts above operating_speed "
+                              f"({dw.speed_range[0]:g} x the critical speed {wc:.4g} rad/s > "
                               f"{setup.operating_speed:.4g} rad/s)")
 
     def before_step(self, setup, bufs, i, action, imbalance_phase):

@@ -17,13 +17,13 @@ from gymnasium import logger
 from gymnasium.utils import seeding
 
 from .actions import as_action_array
-from .info import check_display, step_info
+from .info import RenderModes, check_display, step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
 from . import episodes
 from .episodes import Episode, EpisodeTable
-from .setup import Buffers, EnvSetup, SetupAccess, check_seed, draw_safely
+from .setup import Buffers, EnvSetup, SetupAccess, check_flag, check_seed, draw_safely
 
 COMMON_DOC = textwrap.dedent(r"""
     ## Observation Space
@@ -207,7 +207,7 @@ __doc__ += COMMON_DOC
 class BalancerEnv(SetupAccess, gym.Env):
     """Common implementation; use the registered subclasses."""
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    metadata = {"render_modes": RenderModes(["human", "rgb_array"]), "render_fps": 25}
     kind = "speed"
 
     def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,
@@ -223,8 +223,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         # one frame per control interval plays back in real time
         self.metadata = dict(self.metadata,
                              render_fps=max(1, round(1.0 / self.setup.control_interval)))
-        if not isinstance(record_history, (bool, np.bool_)):
-            raise ValueError(f"record_history must be True or False (got {record_history!r})")
+        check_flag(record_history, "record_history")
         self._bufs = Buffers(self.setup, 1, n_trace=1 if (render_mode or record_history) else 0)
         self._renderer: Renderer | None = None
         self._table = EpisodeTable(self.setup.scene, 1)

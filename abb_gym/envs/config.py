@@ -90,7 +90,9 @@ class RewardWeights:
 
 @dataclass(frozen=True)
 class DwellRanges:
-    runup_acceleration: float = declare(0.5, gt=0.0, le=1.0,
+    # floor: a ramp of 5e-324 x the drive's acceleration has an infinite run-up time, and the
+    # dwell durations (multiples of it) become inf or NaN
+    runup_acceleration: float = declare(0.5, ge=1e-3, le=1.0,
                                         doc="DwellProfile ramp acceleration / "
                                             "drive_max_acceleration")
     speed_range: Range = declare((0.5, 1.5), kind="range", ge=0.0, le=100.0,
@@ -152,13 +154,17 @@ class EnvConfig:
 
     name: str = declare("custom", kind="text", doc="preset name")
     description: str = declare("", kind="text", doc="what the preset is for")
-    operating_speed: float | None = declare(None, unit="rad/s", gt=0.0, le=1e5, nullable=True,
+    # the bounds of the scene's drive_operating_speed, which it replaces (at 5e-324 rad/s the
+    # vibration scale, a whirl amplitude at that speed, is 0 and the observation NaN)
+    operating_speed: float | None = declare(None, unit="rad/s", ge=1e-3, le=1e5, nullable=True,
                                             doc="target speed; null = the scene's")
     control_interval: float = declare(0.01, unit="s", ge=1e-5, le=10.0,
                                       doc="time between agent decisions")
     episode_length: float | None = declare(None, unit="s", gt=0.0, le=1e5, nullable=True,
                                            doc="time limit (truncation); null = automatic")
-    settle_time: float = declare(1.0, unit="s", ge=0.0, le=1e4,
+    # > 0: the residual is the mean vibration over this window (at 0, a mean over nothing:
+    # NaN); any positive time is at least one control interval
+    settle_time: float = declare(1.0, unit="s", gt=0.0, le=1e4,
                                  doc="an unbroken stay in the band this long completes the "
                                      "run-up (the settling window)")
     at_speed_tolerance: float = declare(0.002, gt=0.0, le=0.5,
@@ -225,7 +231,7 @@ def _section(name: str, raw: Any, where: str):
         raise PresetError(f"{where}: field {name!r} must be a mapping with keys "
                           f"{[f.name for f in fields(cls)]} (got {raw!r})")
     allowed = [f.name for f in fields(cls)]
-    unknown = sorted(set(raw) - set(allowed))
+    unknown = sorted(set(raw) - set(allowed), key=str)  # keys may be numbers or None
     if unknown:
         raise PresetError(f"{where}: unknown key(s) {unknown} in {name!r}; allowed: {allowed}")
     table = specs(cls)
@@ -276,11 +282,12 @@ def load_preset(preset: str | os.PathLike | Mapping[str, Any] | EnvConfig = "tra
                           f"{preset!r}); available: {', '.join(list_presets())}")
     raw = _merge(raw, overrides)
     where = f"environment preset {raw.get('name', 'custom')!r}"
-    unknown = sorted(set(raw) - set(PRESET_FIELDS))
+    unknown = sorted(set(raw) - set(PRESET_FIELDS), key=str)  # keys may be numbers or None
     if unknown:
         raise PresetError(f"{where}: unknown field(s) {unknown}; allowed: {list(PRESET_FIELDS)}"
                           f" (plus the environment keywords scene, preset, observe_balls, "
-                          f"render_mode, max_episode_steps)")
+                          f"render_mode, max_episode_steps, record_history, info_level; and "
+                          f"num_envs, kernel of the vector environment)")
     values = {k: (_section(k, v, where) if k in _SECTIONS else v) for k, v in raw.items()}
     if values.get("name") is None:
         values["name"] = "custom"

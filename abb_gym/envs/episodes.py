@@ -312,7 +312,7 @@ def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
         raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)} (got "
                          f"{_show(options)})")
     if options:
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)  # keys of any type
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
                              f"{list(RESET_OPTIONS)}")
@@ -464,8 +464,9 @@ def _stiff_message(setup: Any, drag: float, roll: float, step: float, needed: fl
     per = setup.control_interval / step
     return (f"{where}: an episode with ball_drag_scale={drag:g} and rolling_resistance_scale="
             f"{roll:g}{machine} is too stiff for integrator='rk4': its ball drag and rolling "
-            f"resistance "
-            f"force a {step:.3g} s step ({per:.3g} RK4 steps per {setup.control_interval:g} s "
+            f"resistance force a {step:.3g} s step at the top speed {setup.max_speed:.4g} rad/s "
+            f"(from operating_speed = {setup.operating_speed:.4g} rad/s) ({per:.3g} RK4 steps "
+            f"per {setup.control_interval:g} s "
             f"control interval, {needed / step:.3g} x shorter than the {needed:.3g} s its "
             f"rotation needs; at most {MAX_STIFFNESS:g} x is allowed); use integrator='etdrk4' "
             f"(integrates the stiff drag exactly at the ordinary step) or smaller scales")

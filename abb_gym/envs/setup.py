@@ -10,6 +10,7 @@ static sag) come from :mod:`abb_gym.physics.rotor`.
 from __future__ import annotations
 
 import math
+import os
 from typing import Any, Mapping
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..physics.simulate import state_names
 from ..physics.specialise import resolve_kernel
 from . import episodes
 from .actions import ActionModel, action_model
+from ..configuration import specs
 from .config import EnvConfig, PresetError, load_preset
 from . import kernel
 from .kernel import N_G_ENV, observe_rows
@@ -35,7 +37,65 @@ from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FIL
                      N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
                      T_VIB, T_VIBMAX, T_W, T_X, T_Y)
 
-__all__ = ["EnvSetup", "Buffers", "SetupAccess", "check_seed", "draw_safely"]
+__all__ = ["EnvSetup", "Buffers", "SetupAccess", "check_seed", "check_flag", "draw_safely",
+           "MEMORY_LIMIT",
+           "MAX_EPISODE_LENGTH", "row_bytes", "trace_bytes", "check_memory"]
+
+
+def _physical_memory() -> float:
+    """The machine's memory [bytes] (16 GiB where the system does not say)."""
+    try:
+        return float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return 16.0 * 2 ** 30
+
+
+#: Largest buffers [bytes] an environment allocates: the machine's memory.  A request beyond
+#: it (``num_envs=2**40``, or a recorded history of 1e10 control intervals) is refused with a
+#: ValueError naming the argument, not left to numpy's MemoryError or the system's OOM killer.
+MEMORY_LIMIT = _physical_memory()
+#: Longest automatic episode [s]: the bound of the ``episode_length`` field.
+MAX_EPISODE_LENGTH = float(specs(EnvConfig)["episode_length"].le)
+
+
+def row_bytes(setup: "EnvSetup") -> int:
+    """Bytes per environment of :class:`Buffers` (row arrays and compiled-step lanes, without
+    the history) and of a vector environment's batched spaces."""
+    nb = setup.scene.ball_count
+    ns = 2 * (3 + nb)
+    rows = (setup.n_actions + ns + mdl.N_PARAMS + nb * mdl.N_BALL_PARAMS
+            + setup.n_rows * dl.N_DRIVE + N_ST + N_OUT + 2)
+    lanes = (16 * ns + mdl.N_PARAMS + nb * (mdl.N_BALL_PARAMS + mdl.WORK_COLUMNS) + dl.N_DRIVE
+             + batch.N_F + max(batch.N_G, N_G_ENV))
+    spaces_bounds = 2 * 4 * (setup.obs_dim + setup.n_actions)  # float32 low and high
+    return 8 * (rows + lanes) + 4 * setup.obs_dim + 2 + spaces_bounds
+
+
+def trace_bytes(setup: "EnvSetup") -> int:
+    """Bytes of one environment's recorded history (one row per control interval)."""
+    return 8 * (setup.max_steps + 1) * (T_BALLS + setup.scene.ball_count)
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.3g} GB"
+
+
+def check_memory(setup: "EnvSetup", n: int, n_trace: int) -> None:
+    """Raise ValueError, naming the argument and what to change, if the buffers of ``n``
+    environments with ``n_trace`` histories need more than :data:`MEMORY_LIMIT`."""
+    rows = float(n) * row_bytes(setup)
+    trace = float(min(n_trace, n)) * trace_bytes(setup)
+    if rows > MEMORY_LIMIT:
+        raise ValueError(f"num_envs = {n} needs {_gb(rows)} of buffers ({row_bytes(setup)} "
+                         f"bytes per sub-environment), more than this machine's "
+                         f"{_gb(MEMORY_LIMIT)}: use fewer sub-environments")
+    if rows + trace > MEMORY_LIMIT:
+        raise ValueError(f"the history kept by record_history=True or render_mode ("
+                         f"{setup.max_steps + 1} control intervals x {min(n_trace, n)} "
+                         f"environment(s)) needs {_gb(trace)}, more than this machine's "
+                         f"{_gb(MEMORY_LIMIT)}: record no history, or shorten the episode "
+                         f"(episode_length = {setup.episode_length:.6g} s, control_interval = "
+                         f"{setup.control_interval:g} s) or use fewer sub-environments")
 
 
 def check_seed(seed: Any, what: str = "seed") -> int | None:
@@ -47,6 +107,14 @@ def check_seed(seed: Any, what: str = "seed") -> int | None:
             or seed < 0:
         raise ValueError(f"{what} must be None or an integer >= 0 (got {seed!r})")
     return int(seed)
+
+
+def check_flag(value: Any, what: str) -> bool:
+    """``value`` if it is True or False (numpy's too), else a ValueError naming ``what``:
+    ``"no"`` or ``[]`` are not read as flags."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{what} must be True or False (got {value!r:.80})")
+    return bool(value)
 
 
 def draw_safely(prepare, rngs: list):
@@ -68,6 +136,7 @@ class Buffers:
 
     def __init__(self, setup: "EnvSetup", n: int, n_trace: int = 0, kernel: str | None = None,
                  lanes: int | None = None):
+        check_memory(setup, n, n_trace)
         nb = setup.scene.ball_count
         ns = 2 * (3 + nb)
         self.act = np.zeros((n, setup.n_actions))
@@ -172,9 +241,7 @@ class EnvSetup:
             raise ValueError(f"scene must be a scene name, a path or a Scene (got {scene!r})")
         self.scene = load_scene(scene)
         self.config: EnvConfig = load_preset(preset, **dict(overrides or {}))
-        if not isinstance(observe_balls, (bool, np.bool_)):
-            raise ValueError(f"observe_balls must be True or False (got {observe_balls!r})")
-        self.observe_balls = bool(observe_balls)
+        self.observe_balls = check_flag(observe_balls, "observe_balls")
         if max_episode_steps is not None:
             if isinstance(max_episode_steps, bool) or not isinstance(
                     max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
@@ -193,17 +260,33 @@ class EnvSetup:
         self.dwell_acceleration = dw.runup_acceleration * self.max_acceleration
         self.nominal_runup_time = self.operating_speed / self.dwell_acceleration
         am = self.actions
-        length = (float(cfg.episode_length) if cfg.episode_length is not None
-                  else am.default_episode_length(self))
+        if cfg.episode_length is not None:
+            length = float(cfg.episode_length)
+            given = f"field 'episode_length' = {length:g} s"
+        else:
+            length = am.default_episode_length(self)
+            given = f"automatic: {am.episode_length_rule}"
+            # the bound of a given episode_length holds for the automatic one as well (a
+            # drive of 1e-3 rad/s^2 would otherwise ask for 1e8 s, a ramp of 1e-300 x the
+            # drive's acceleration for an infinite episode)
+            if not length <= MAX_EPISODE_LENGTH:
+                raise PresetError(
+                    f"environment preset {cfg.name!r}: the automatic episode length "
+                    f"{am.episode_length_rule} = {length:.4g} s (operating_speed = "
+                    f"{self.operating_speed:g} rad/s, the scene's drive_max_acceleration = "
+                    f"{self.max_acceleration:g} rad/s^2) exceeds {MAX_EPISODE_LENGTH:g} s, the "
+                    f"bound of field 'episode_length': give episode_length or a faster run-up")
         self.max_steps = _as_int_steps(length, self.control_interval)
         self.episode_length = self.max_steps * self.control_interval
         self.settle_steps = int(round(cfg.settle_time / self.control_interval))
         if cfg.settle_time > 0 and self.settle_steps == 0:
             self.settle_steps = 1
         if self.settle_steps >= self.max_steps:
-            raise PresetError(f"environment preset {cfg.name!r}: settle_time = "
-                              f"{cfg.settle_time:g} s must be shorter than the episode "
-                              f"length {self.episode_length:g} s")
+            raise PresetError(f"environment preset {cfg.name!r}: field 'settle_time' = "
+                              f"{cfg.settle_time:g} s ({self.settle_steps} control intervals "
+                              f"of control_interval = {self.control_interval:g} s) must be "
+                              f"shorter than the episode, {self.max_steps} intervals "
+                              f"({self.episode_length:g} s; {given})")
         am.check(self)
         self.max_speed = am.max_speed(self.operating_speed, cfg)
         # observation scale: the resonance amplitude of the machine with its balancer off,

@@ -79,7 +79,8 @@ from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
 from . import episodes
 from .episodes import EpisodeTable
-from .setup import Buffers, EnvSetup, SetupAccess, check_seed, draw_safely
+from .setup import (Buffers, EnvSetup, SetupAccess, check_flag, check_memory, check_seed,
+                    draw_safely)
 
 __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
            "DwellProfileVectorEnv"]
@@ -105,15 +106,15 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
         self.num_envs = int(num_envs)
+        check_flag(record_history, "record_history")
+        n_trace = (self.num_envs if record_history
+                   else min(self.num_envs, MAX_RENDERED) if render_mode else 0)
+        check_memory(self.setup, self.num_envs, n_trace)  # before the batched spaces
         self.render_mode = render_mode
         self.single_observation_space = self.setup.observation_space
         self.single_action_space = self.setup.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        if not isinstance(record_history, (bool, np.bool_)):
-            raise ValueError(f"record_history must be True or False (got {record_history!r})")
-        n_trace = (self.num_envs if record_history
-                   else min(self.num_envs, MAX_RENDERED) if render_mode else 0)
         self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace, kernel=kernel)
         self._args = self._bufs.kernel_args()
         self._step_fn = None  # the compiled step, fetched at the first step

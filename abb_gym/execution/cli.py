@@ -77,6 +77,18 @@ def executor_from_args(args: argparse.Namespace, **overrides: Any) -> Executor:
     ``overrides`` (e.g. ``progress=False``, ``chunksize=8``, ``store=...``) take precedence.
     Raises ValueError (reported as one line by ``abb-gym``) for inconsistent options.
     """
+    resume = getattr(args, "resume_dir", None)
+    if resume is not None:  # named as the option, before any task (the store checks again)
+        from pathlib import Path
+        if not str(resume).strip() or "\x00" in str(resume):
+            raise ValueError(f"--resume-dir must be a folder path (got {resume!r:.200})")
+        try:
+            blocked = Path(resume).exists() and not Path(resume).is_dir()
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--resume-dir {str(resume)[:200]!r}: not a usable path "
+                             f"({getattr(exc, 'strerror', None) or exc})") from None
+        if blocked:
+            raise ValueError(f"--resume-dir {str(resume)!r} is a file, not a folder")
     kw: dict[str, Any] = dict(workers=getattr(args, "workers", None),
                               ray=bool(getattr(args, "ray", False)),
                               ray_address=getattr(args, "ray_address", None),

@@ -36,10 +36,14 @@ def resolve_kernel(kernel: str | None, lanes: int) -> str:
     ``VECTORISE_FROM`` lanes per block on, where its compilation pays off."""
     if kernel is not None and not isinstance(kernel, str):
         raise ValueError(f"kernel must be None or one of {KERNELS} (got {kernel!r:.80})")
-    kernel = kernel or os.environ.get("ABB_GYM_KERNEL") or "auto"
+    # only None means the default: an empty name is refused like any unknown one (an empty
+    # ABB_GYM_KERNEL is unset)
+    passed = kernel is not None
+    if not passed:
+        kernel = os.environ.get("ABB_GYM_KERNEL") or "auto"
     if kernel not in KERNELS:
-        raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r}; from "
-                         f"ABB_GYM_KERNEL if not passed)")
+        where = "" if passed else "; from $ABB_GYM_KERNEL"
+        raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r:.80}{where})")
     if kernel == "auto":
         kernel = "specialised" if lanes >= VECTORISE_FROM else "generic"
     return kernel
