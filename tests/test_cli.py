@@ -168,3 +168,13 @@ def test_help_shows_version_every_method_defaults_and_no_rest_markup(capsys):
     # the examples of a description keep their lines
     assert "\n    abb-gym tune-baselines --scene yoshida_odd" in \
         sub.choices["tune-baselines"].format_help()
+
+
+def test_evaluate_refuses_an_episode_count_beyond_its_bound(capsys):
+    """`evaluate --episodes 1e12` passed every check and then built the chunk list for
+    minutes; it is one line and exit 2 before any work."""
+    from abb_gym.cli import main as cli_main
+    assert cli_main(["evaluate", "--policy", "baseline:ramp", "--episodes",
+                     str(10 ** 12)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--episodes must be in [1, 1000000]" in err[0]

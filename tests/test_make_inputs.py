@@ -279,6 +279,8 @@ def _good(spec):
         return st.sampled_from(spec.choices)
     if spec.kind == "text":
         return st.text(max_size=6)
+    if spec.kind == "flag":
+        return st.booleans()
     one = _number_in(spec)
     if spec.kind == "range":
         pair = st.tuples(one, one).map(lambda p: [min(p), max(p)])
@@ -426,7 +428,9 @@ def _check_took_effect(native, kwargs, vector):
     setup = native.setup
     nb = setup.scene.ball_count
     obs_dim = setup.obs_dim
-    assert obs_dim == 5 + setup.n_actions + (2 * nb if kwargs.get("observe_balls") else 0)
+    frame = (5 + setup.n_actions + (3 if setup.config.sync_vibration.enabled else 0)
+             + (2 * nb if kwargs.get("observe_balls") else 0))
+    assert obs_dim == frame * setup.config.frame_stack
     assert native.info_level == kwargs.get("info_level", "lean")
     mode = kwargs.get("render_mode")
     assert native.render_mode == ("rgb_array" if mode == "rgb_array_list" else mode)

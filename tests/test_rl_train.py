@@ -231,3 +231,18 @@ def test_an_agent_observing_the_sync_vibration_is_evaluated_with_it(tmp_path):
                                          control_interval=0.05, frame_stack=2))
     with pytest.raises(ValueError, match="observation shape|sync_vibration"):
         pol.reset(env)
+
+
+def test_config_keys_of_mixed_types_and_reserved_env_keywords_are_one_error(tmp_path):
+    """A YAML key like 1: or ~: next to text keys, or env_kwargs setting what the trainer sets
+    itself (num_envs...), is a TrainConfigError naming it, never a TypeError."""
+    from abb_gym.rl.config import TrainConfigError
+    mixed = tmp_path / "mixed.yml"
+    mixed.write_text(f"{SPEED}:\n  n_envs: 2\n  1: 3\n  ~: 4\n")
+    with pytest.raises(TrainConfigError, match="unknown key"):
+        load_config(mixed)
+    for key in ("num_envs", "vectorization_mode", "wrappers"):
+        bad = tmp_path / f"{key}.yml"
+        bad.write_text(yaml.safe_dump({SPEED: {"n_envs": 2, "env_kwargs": {key: 3}}}))
+        with pytest.raises(TrainConfigError, match=key):
+            load_config(bad)

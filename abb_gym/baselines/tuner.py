@@ -267,6 +267,35 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
     return result
 
 
+def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100,
+                     seed: int = 0, preset: str = "test", budget: int = 120,
+                     env_id: str = ENV_ID, env_kwargs: dict[str, Any] | None = None,
+                     executor=None, progress: bool = True) -> list[dict[str, Any]]:
+    """A clairvoyant open-loop oracle: ``family`` tuned by CMA-ES on each test machine alone.
+
+    Machine ``k`` is episode ``k`` of the seeded test set (the reset with seed ``seed + k``,
+    as :func:`abb_gym.evaluation.evaluate.evaluate` runs it); its best candidate of ``budget``
+    is scored on that same machine, so the figure knows every parameter of the machine, its
+    initial ball angles included: an upper bound for what a controller that has to find out
+    can reach with this family, not a policy.  Returns one row per machine (the metrics of
+    :data:`SUMMARY_KEYS` and the parameters)."""
+    _check_counts(budget=budget, episodes=episodes)
+    check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
+    family_class(family)
+    scales = search_scales(scene_name, env_id, preset)
+    rows = []
+    with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
+              unit="candidate", disable=not progress) as bar:
+        for k in range(episodes):
+            best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
+                                     preset, env_id, executor, bar, env_kwargs)
+            if n < budget:
+                bar.total -= budget - n
+                bar.refresh()
+            rows.append(dict(best, episode=k, seed=seed + k, candidates=n))
+    return rows
+
+
 def _rounded(params: dict[str, Any]) -> dict[str, Any]:
     return {k: ([round(x, 6) for x in v] if isinstance(v, list) else
                 (round(v, 6) if isinstance(v, float) else v)) for k, v in params.items()}

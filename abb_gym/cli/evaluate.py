@@ -48,14 +48,14 @@ def _executor(args):
 
 
 def run(args) -> int:
-    from ..evaluation.evaluate import check_inputs, evaluate
+    from ..evaluation.evaluate import MAX_EPISODES, check_inputs, evaluate
     from ..evaluation.report import summary_table, write_report
     from .outputs import output_folder
     # every input before any folder or task: one line, exit 2
     for label, n, least in (("--episodes", args.episodes, 1), ("--sweep", args.sweep, 0),
                             ("--sweep-episodes", args.sweep_episodes, 1)):
-        if n < least:
-            raise ValueError(f"{label} must be >= {least} (got {n})")
+        if not least <= n <= MAX_EPISODES:
+            raise ValueError(f"{label} must be in [{least}, {MAX_EPISODES}] (got {n})")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0 (got {args.seed})")
     for spec in args.policy:  # a bad agent folder is one line before any episode

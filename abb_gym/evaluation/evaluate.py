@@ -157,10 +157,14 @@ def _drive_torque(setup, t, w, act):
     return spinning_inertia(setup.scene) * accel + setup.scene.bearing_drag * w
 
 
+#: the most episodes one evaluation runs (a million run-ups is hours of computing already)
+MAX_EPISODES = 1_000_000
+
+
 def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, preset: str = "test",
            chunk_size: int = 32, record: Sequence[int] = (0,), **env_kwargs) -> list[Chunk]:
-    if episodes < 1:
-        raise ValueError(f"episodes must be >= 1 (got {episodes})")
+    if episodes < 1 or episodes > MAX_EPISODES:
+        raise ValueError(f"episodes must be in [1, {MAX_EPISODES}] (got {episodes})")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1 (got {chunk_size})")
     kw = tuple(sorted(env_kwargs.items()))

@@ -109,6 +109,9 @@ __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_F
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
                  "vibration_filter_time", "dwell", "sync_vibration", "frame_stack")
 ENV_KEYWORDS = ("scene", "preset", "observe_balls")
+#: gym.make_vec keywords the trainer sets itself
+RESERVED_ENV_KWARGS = frozenset({"id", "num_envs", "vectorization_mode", "vector_kwargs",
+                                 "wrappers"})
 ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
@@ -285,12 +288,12 @@ class TrainConfig:
             raise TrainConfigError(f"{where}: field 'tensorboard_log' belongs in the "
                                    f"{ABB_GYM_SECTION} section, not under the environment id "
                                    f"(rl_zoo3 passes its own tensorboard_log to PPO)")
-        stray = sorted(set(extra) - set(ABB_GYM_KEYS))
+        stray = sorted(set(extra) - set(ABB_GYM_KEYS), key=str)
         if stray:
             raise TrainConfigError(f"{where}: unknown key(s) {stray} in {ABB_GYM_SECTION}; "
                                    f"allowed: {list(ABB_GYM_KEYS)} (hyperparameters go under "
                                    f"the environment id)")
-        twice = sorted(set(raw) & set(extra))
+        twice = sorted(set(raw) & set(extra), key=str)
         if twice:
             raise TrainConfigError(f"{where}: key(s) {twice} given both under the environment "
                                    f"id and in {ABB_GYM_SECTION}; keep the {ABB_GYM_SECTION} "
@@ -299,7 +302,7 @@ class TrainConfig:
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
         ppo_keys = _ppo_keywords()
-        unknown = sorted(set(raw) - own - ppo_keys)
+        unknown = sorted(set(raw) - own - ppo_keys, key=str)
         if unknown:
             raise TrainConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
                                    f"{sorted(own)} and the PPO keywords {sorted(ppo_keys)}")
@@ -316,6 +319,12 @@ class TrainConfig:
                     raise TrainConfigError(f"{where}: field {key!r} must be a mapping (got "
                                            f"{v!r})")
                 v = dict(v)
+                # what the trainer sets itself (a TypeError inside gym.make_vec otherwise)
+                reserved = sorted(set(v) & RESERVED_ENV_KWARGS, key=str)
+                if reserved:
+                    raise TrainConfigError(f"{where}: field {key!r} must not set {reserved}: "
+                                           f"the trainer sets them (n_envs is the number of "
+                                           f"sub-environments)")
             elif key == "tensorboard_log":
                 # SB3 would only fail when training starts, after the environments are built
                 if v is not None and (not isinstance(v, str) or not v):
