@@ -261,3 +261,14 @@ def test_tuner_survives_a_flat_objective(monkeypatch):
                         seed=0, progress=False)
     assert set(result["families"]) == {"ramp", "knots"}
     assert all(1 <= f["candidates"] <= 21 for f in result["families"].values())
+
+
+def test_tune_per_machine_tunes_each_test_machine_alone():
+    """The oracle of the feedback gap: machine k is test episode k (seed + k), its default
+    profile is one of its candidates, so its best return is never below the default's there."""
+    rows = tuner.tune_per_machine("yoshida_odd", "knots", episodes=2, seed=7, preset="test",
+                                  budget=8, progress=False)
+    assert [r["seed"] for r in rows] == [7, 8] and all(r["candidates"] == 8 for r in rows)
+    for r in rows:
+        default = tuner.evaluate_candidates("yoshida_odd", "knots", [{}], 1, r["seed"], "test")[0]
+        assert r["return"] >= default["return"]
