@@ -44,7 +44,7 @@ def _reached(*args, **kwargs):
     raise Reached
 
 
-STUBS = ["abb_gym.cli.demo.simulate", "abb_gym.benchmarks.speed.run_speed",
+STUBS = ["abb_gym.cli.demo.simulate", "abb_gym.benchmarks.speed.iter_speed",
          "abb_gym.benchmarks.accuracy.run_accuracy", "abb_gym.analysis.stability_map",
          "abb_gym.evaluation.studies.settling_study",
          "abb_gym.evaluation.studies.ball_position_study",
