@@ -272,3 +272,18 @@ def test_tune_per_machine_tunes_each_test_machine_alone():
     for r in rows:
         default = tuner.evaluate_candidates("yoshida_odd", "knots", [{}], 1, r["seed"], "test")[0]
         assert r["return"] >= default["return"]
+
+
+def test_tune_per_machine_from_a_start_never_ends_below_it():
+    """Warm-started from the tuned knots, the oracle is at least that profile on every
+    machine: it is one of the candidates, and the search refines it."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    start = tuned_parameters("yoshida_odd", "knots")
+    rows = tuner.tune_per_machine("yoshida_odd", "knots", episodes=2, seed=3, preset="test",
+                                  budget=8, progress=False, start=start)
+    for r in rows:
+        ref = tuner.evaluate_candidates("yoshida_odd", "knots", [start], 1, r["seed"], "test")[0]
+        assert r["return"] >= ref["return"]
+    x = tuner.unit_from_params("knots", start, tuner.search_scales("yoshida_odd"))
+    back = tuner.params_from_unit("knots", x, tuner.search_scales("yoshida_odd"))
+    np.testing.assert_allclose(back["knot_speeds"], start["knot_speeds"], rtol=1e-9)

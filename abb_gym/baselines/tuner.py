@@ -77,6 +77,19 @@ def params_from_unit(family: str, x: np.ndarray, scales: dict[str, float]) -> di
     return out
 
 
+def unit_from_params(family: str, params: dict[str, Any], scales: dict[str, float]
+                     ) -> np.ndarray:
+    """The point of the unit cube of ``family``'s search space nearest to ``params`` (the
+    inverse of :func:`params_from_unit`; a parameter not given sits at the centre)."""
+    x = []
+    for name, index, lo, hi, unit in profiles.search_space(family_class(family)):
+        v = params.get(name)
+        if v is not None and index is not None:
+            v = v[index] if index < len(v) else None
+        x.append(0.5 if v is None else (float(v) / scales[unit] - lo) / (hi - lo))
+    return np.clip(np.array(x, dtype=float), 0.0, 1.0)
+
+
 @dataclass(frozen=True)
 class CandidateTask:
     """Candidates x episodes of one family as one vector environment."""
@@ -177,15 +190,23 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
 
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
-                executor, bar, env_kwargs) -> tuple[dict, dict, int]:
+                executor, bar, env_kwargs, start: dict | None = None
+                ) -> tuple[dict, dict, int]:
+    """CMA-ES over the unit box from its centre, or from ``start`` (parameters, also a
+    candidate, with a smaller initial step: a refinement)."""
     import cma
 
     space = profiles.search_space(family_class(family))
-    default = _evaluate_candidates(scene_name, family, [{}], episodes, seed, preset,
-                                   executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)[0]
-    best = default
-    evaluations = 1
-    if space:
+    first = [{}] if start is None else [{}, dict(start)]
+    rows = _evaluate_candidates(scene_name, family, first, episodes, seed, preset,
+                                executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)
+    default = rows[0]
+    best = max(rows, key=lambda r: r["return"] if math.isfinite(r["return"]) else -math.inf)
+    evaluations = len(rows)
+    x0, sigma0 = np.full(len(space), 0.5), 0.3
+    if start is not None:
+        x0, sigma0 = unit_from_params(family, start, scales), 0.1
+    if space and evaluations < budget:
         # maxstd: a step beyond half the unit box means nothing, and without a cap cma 4.x
         # fails on a flat objective ("not yet initialized (dimension needed)"), as when no
         # candidate of a family ever reaches the operating speed
@@ -193,7 +214,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
                 "maxfevals": max(budget - 1, 1), "maxstd": 0.5}
         if popsize:
             opts["popsize"] = popsize
-        es = cma.CMAEvolutionStrategy(np.full(len(space), 0.5), 0.3, opts)
+        es = cma.CMAEvolutionStrategy(x0, sigma0, opts)
         while not es.stop() and evaluations < budget:
             xs = es.ask()
             # the last generation runs only the candidates the budget has left: the family
@@ -270,15 +291,18 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
 def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100,
                      seed: int = 0, preset: str = "test", budget: int = 120,
                      env_id: str = ENV_ID, env_kwargs: dict[str, Any] | None = None,
-                     executor=None, progress: bool = True) -> list[dict[str, Any]]:
+                     executor=None, progress: bool = True,
+                     start: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """A clairvoyant open-loop oracle: ``family`` tuned by CMA-ES on each test machine alone.
 
     Machine ``k`` is episode ``k`` of the seeded test set (the reset with seed ``seed + k``,
     as :func:`abb_gym.evaluation.evaluate.evaluate` runs it); its best candidate of ``budget``
     is scored on that same machine, so the figure knows every parameter of the machine, its
     initial ball angles included: an upper bound for what a controller that has to find out
-    can reach with this family, not a policy.  Returns one row per machine (the metrics of
-    :data:`SUMMARY_KEYS` and the parameters)."""
+    can reach with this family, not a policy.  With ``start`` (e.g. the parameters tuned on
+    the training distribution) every machine's search refines them and ``start`` is one of its
+    candidates, so the oracle never scores below ``start`` on any machine.  Returns one row
+    per machine (the metrics of :data:`SUMMARY_KEYS` and the parameters)."""
     _check_counts(budget=budget, episodes=episodes)
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     family_class(family)
@@ -288,7 +312,7 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
               unit="candidate", disable=not progress) as bar:
         for k in range(episodes):
             best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
-                                     preset, env_id, executor, bar, env_kwargs)
+                                     preset, env_id, executor, bar, env_kwargs, start)
             if n < budget:
                 bar.total -= budget - n
                 bar.refresh()
