@@ -62,9 +62,12 @@ def test_every_shipped_config_loads():
             assert cfg.n_envs >= 1 and cfg.n_timesteps >= 1
             cfg.ppo_kwargs()
             kw = eval_env_kwargs(cfg)
-            # the held-out test preset; the training's reward shaping and randomisation are
-            # not carried over (a config may set eval reward weights for model selection)
-            assert kw["preset"] == "test"
+            # a held-out preset (test, or the one the config names, e.g. varied_test for
+            # varied), never the training one; the training's reward shaping and
+            # randomisation are not carried over (a config may set eval reward weights for
+            # model selection)
+            assert kw["preset"] == cfg.eval_env_kwargs.get("preset", "test")
+            assert kw["preset"] != cfg.env_kwargs.get("preset", "train")
             assert kw.get("reward") == cfg.eval_env_kwargs.get("reward")
             assert kw.get("randomize") == cfg.eval_env_kwargs.get("randomize")
 
