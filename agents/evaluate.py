@@ -57,12 +57,10 @@ def goal_check(ppo, replay, knots) -> dict:
     """The goal of the module docstring from three :class:`EvaluationResult` on the same
     machines."""
     from abb_gym.evaluation.replay import feedback_value
-    from abb_gym.evaluation.statistics import paired_difference_ci
+    from abb_gym.evaluation.statistics import paired_interval
 
     def paired(a, b, key):
-        mean, low, high, n = paired_difference_ci([e[key] for e in a.episodes],
-                                                  [e[key] for e in b.episodes])
-        return {"mean": mean, "ci_low": low, "ci_high": high, "n": n}
+        return paired_interval([e[key] for e in a.episodes], [e[key] for e in b.episodes])
 
     s_ppo, s_knots = ppo.summary(), knots.summary()
     r_ppo = s_ppo["residual_vibration"]["mean"]

@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     os.environ["ABB_GYM_CONFIGS"] = args.configs
     from abb_gym.evaluation.evaluate import evaluate
     from abb_gym.evaluation.replay import feedback_value
-    from abb_gym.evaluation.statistics import mean_ci, paired_difference_ci
+    from abb_gym.evaluation.statistics import mean_interval, paired_interval
 
     env_id = "abb_gym/RunUpSpeed-v0"
     reward = {"reward": {"residual": args.reward_residual}}
@@ -61,16 +61,13 @@ def main(argv=None) -> int:
             return 2
         episodes["oracle: knots per machine"] = data["machines"][:args.episodes]
 
-    def stat(values, key):
-        m, lo, hi, _ = mean_ci(values, nonnegative=key != "return")
-        return {"mean": m, "ci_low": lo, "ci_high": hi}
-
     report = {"scene": args.scene, "preset": args.preset, "seed": args.seed,
               "reward_residual": args.reward_residual, "rows": {}, "gap_vs_knots": {},
               "feedback_value": {}}
     print("| policy | " + " | ".join(KEYS) + " |\n|---" * (len(KEYS) + 1) + "|")
     for name, eps in episodes.items():
-        row = {k: stat([float(e[k]) for e in eps], k) for k in KEYS}
+        row = {k: mean_interval([float(e[k]) for e in eps], nonnegative=k != "return")
+               for k in KEYS}
         report["rows"][name] = row
         print(f"| {name} | " + " | ".join(
             f"{row[k]['mean']:.3g} [{row[k]['ci_low']:.3g}, {row[k]['ci_high']:.3g}]"
@@ -80,11 +77,8 @@ def main(argv=None) -> int:
         for name, eps in episodes.items():
             if name == "baseline:knots" or name.startswith("replay:"):
                 continue
-            gap = {}
-            for k in ("return", "residual_vibration", "run_up_time"):
-                m, lo, hi, _ = paired_difference_ci([float(e[k]) for e in eps],
-                                                    [float(e[k]) for e in knots])
-                gap[k] = {"mean": m, "ci_low": lo, "ci_high": hi}
+            gap = {k: paired_interval([float(e[k]) for e in eps], [float(e[k]) for e in knots])
+                   for k in ("return", "residual_vibration", "run_up_time")}
             report["gap_vs_knots"][name] = gap
             print(f"{name} - knots: " + ", ".join(
                 f"{k} {v['mean']:+.3g} [{v['ci_low']:+.3g}, {v['ci_high']:+.3g}]"

@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     from abb_gym.baselines.baseline_policy import tuned_parameters
     from abb_gym.baselines.tuner import tune_per_machine
     from abb_gym.configuration import parse_assignments
-    from abb_gym.evaluation.statistics import mean_ci
+    from abb_gym.evaluation.statistics import mean_interval
     try:
         env_kwargs = parse_assignments(args.env_kwargs, "--env-kwargs")
         start = tuned_parameters(args.scene, "knots") if args.start == "tuned" else None
@@ -48,11 +48,8 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"oracle_knots: error: {exc}", file=sys.stderr)
         return 2
-    summary = {}
-    for key in ("at_speed", "run_up_time", "residual_vibration", "return"):
-        mean, low, high, n = mean_ci([r[key] for r in rows],
-                                     nonnegative=key != "return")
-        summary[key] = {"mean": mean, "ci_low": low, "ci_high": high, "n": n}
+    summary = {key: mean_interval([r[key] for r in rows], nonnegative=key != "return")
+               for key in ("at_speed", "run_up_time", "residual_vibration", "return")}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "oracle.json").write_text(json.dumps(

@@ -20,3 +20,21 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip_slow)
         if "wheel" in item.keywords and not config.getoption("--runwheel"):
             item.add_marker(skip_wheel)
+
+
+@pytest.fixture
+def strict_check_env():
+    """Gymnasium's ``check_env`` on ``env.unwrapped`` with every warning an error, except the
+    one allowed by design: check_env renders each render mode, and "human" without a display
+    warns so.  Closes the environment."""
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env
+
+    def check(env):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
+            check_env(env.unwrapped)
+        env.close()
+    return check

@@ -10,7 +10,6 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
 
 import abb_gym
 from abb_gym.envs import ENV_IDS, PresetError, load_preset
@@ -42,15 +41,11 @@ def rollout(env, actions, seed, options=None):
 # ------------------------------------------------------------------------ API conformance
 @pytest.mark.parametrize("scene", SCENES)
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_check_env_every_id_and_scene(env_id, scene):
+def test_check_env_every_id_and_scene(env_id, scene, strict_check_env):
     """check_env with every warning an error, except the allowed ones: check_env renders each
     of the environment's render modes, and "human" without a display warns so (by design)."""
     env = gym.make(env_id, scene=scene)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
-        check_env(env.unwrapped)
-    env.close()
+    strict_check_env(env)
 
 
 def test_registration_and_spaces():

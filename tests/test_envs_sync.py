@@ -20,12 +20,10 @@ tolerance could hide is the support's lag itself: 0.76 deg = 0.013 rad below res
 from __future__ import annotations
 
 import math
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
 
 import abb_gym  # noqa: F401  (registers the ids)
 from abb_gym.envs import PresetError, load_preset
@@ -204,14 +202,10 @@ def test_frame_stack_holds_the_last_k_observations_oldest_first():
 
 # ------------------------------------------------------------------------ API conformance
 @pytest.mark.parametrize("env_id", ["abb_gym/RunUpTorque-v0", SPEED, "abb_gym/DwellProfile-v0"])
-def test_check_env_with_sync_observation_and_frame_stack(env_id):
+def test_check_env_with_sync_observation_and_frame_stack(env_id, strict_check_env):
     env = gym.make(env_id, sync_vibration={"enabled": True, "noise": 0.01}, frame_stack=2,
                    observe_balls=True)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
-        check_env(env.unwrapped)
-    env.close()
+    strict_check_env(env)
 
 
 def test_sync_and_frame_stack_survive_pickling():

@@ -4,12 +4,10 @@ support damping), none of it observed."""
 from __future__ import annotations
 
 import math
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
 
 import abb_gym  # noqa: F401  (registers the ids)
 from abb_gym.envs import ENV_IDS, PresetError, load_preset
@@ -153,13 +151,9 @@ def test_preset_ranges_are_checked_at_their_corners():
 @pytest.mark.parametrize("scene", SCENES)
 @pytest.mark.parametrize("preset", ["varied", "varied_test"])
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_check_env_with_the_varied_presets(env_id, scene, preset):
+def test_check_env_with_the_varied_presets(env_id, scene, preset, strict_check_env):
     env = gym.make(env_id, scene=scene, preset=preset)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        warnings.filterwarnings("ignore", message=".*render_mode='human' has no display here")
-        check_env(env.unwrapped)
-    env.close()
+    strict_check_env(env)
 
 
 def test_varied_preset_observes_the_sync_vibration():

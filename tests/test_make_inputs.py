@@ -486,22 +486,21 @@ def _made_or_named(make, kwargs, vector):
     env.close()
 
 
-@settings(PROPERTY, max_examples=400 * SCALE)
-@given(env_id=st.sampled_from(ENV_IDS), kwargs=make_kwargs(vector=False))
-def test_gym_make_gives_an_environment_or_an_error_naming_the_keyword(env_id, kwargs, paths):
-    kwargs = _resolve(kwargs, paths)
+def _fuzz(make, kwargs, vector: bool) -> None:
     with warnings.catch_warnings(), pytest.MonkeyPatch.context() as mp:
         warnings.simplefilter("ignore")
         mp.setattr(env_setup, "MEMORY_LIMIT", 2e8)  # no example allocates more than 200 MB
-        _made_or_named(lambda **kw: gym.make(env_id, **kw), kwargs, vector=False)
+        _made_or_named(make, kwargs, vector=vector)
+
+
+@settings(PROPERTY, max_examples=400 * SCALE)
+@given(env_id=st.sampled_from(ENV_IDS), kwargs=make_kwargs(vector=False))
+def test_gym_make_gives_an_environment_or_an_error_naming_the_keyword(env_id, kwargs, paths):
+    _fuzz(lambda **kw: gym.make(env_id, **kw), _resolve(kwargs, paths), vector=False)
 
 
 @settings(PROPERTY, max_examples=300 * SCALE)
 @given(env_id=st.sampled_from(ENV_IDS), kwargs=make_kwargs(vector=True))
 def test_gym_make_vec_gives_an_environment_or_an_error_naming_the_keyword(env_id, kwargs, paths):
-    kwargs = _resolve(kwargs, paths)
-    with warnings.catch_warnings(), pytest.MonkeyPatch.context() as mp:
-        warnings.simplefilter("ignore")
-        mp.setattr(env_setup, "MEMORY_LIMIT", 2e8)
-        _made_or_named(lambda **kw: gym.make_vec(env_id, vectorization_mode="vector_entry_point",
-                                                 **kw), kwargs, vector=True)
+    _fuzz(lambda **kw: gym.make_vec(env_id, vectorization_mode="vector_entry_point", **kw),
+          _resolve(kwargs, paths), vector=True)

@@ -161,7 +161,7 @@ class ClosedLoopPolicy(SpeedReferencePolicy):
 
     def reset(self, env, mask: np.ndarray) -> None:
         self._bind(env)
-        if self.kind == "dwell":
+        if not self.acts_on(self.setup):
             raise ValueError(f"{self.name} is a closed-loop baseline; DwellProfile decides "
                              f"before the run and observes nothing to react to")
         if self._controller is None:

@@ -188,6 +188,14 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
     return rows
 
 
+def _shrink_bar(bar, budget: int, used: int) -> None:
+    """A search that stopped early (or had nothing to search) took ``used`` of its ``budget``
+    candidates: the bar still ends at its total."""
+    if used < budget:
+        bar.total -= budget - used
+        bar.refresh()
+
+
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
                 executor, bar, env_kwargs, start: dict | None = None
@@ -271,9 +279,7 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
             bar.set_postfix_str(fam)
             best, default, n = _cma_search(fam, scene_name, scales, budget, popsize, episodes,
                                            seed, preset, env_id, executor, bar, env_kwargs)
-            if n < budget:  # the search stopped early (or the family has nothing to search):
-                bar.total -= budget - n  # the bar still ends at its total
-                bar.refresh()
+            _shrink_bar(bar, budget, n)
             result["families"][fam] = {
                 "params": _rounded(best["params"]),
                 "mean_return": round(best["return"], 5),
@@ -313,9 +319,7 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
         for k in range(episodes):
             best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
                                      preset, env_id, executor, bar, env_kwargs, start)
-            if n < budget:
-                bar.total -= budget - n
-                bar.refresh()
+            _shrink_bar(bar, budget, n)
             rows.append(dict(best, episode=k, seed=seed + k, candidates=n))
     return rows
 

@@ -29,7 +29,7 @@ from tqdm import tqdm
 from ..physics.rotor import spinning_inertia
 from . import metrics as mt
 from .registry import Policy, resolve
-from .statistics import mean_ci, share_ci
+from .statistics import mean_interval, share_ci
 
 DWELL_ID = "abb_gym/DwellProfile-v0"
 SPEED_ID = "abb_gym/RunUpSpeed-v0"
@@ -180,12 +180,13 @@ def env_ids() -> list[str]:
 
 
 def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
-                 policy: str | None = None, **env_kwargs: Any) -> None:
+                 policy: str | None = None, **env_kwargs: Any) -> Policy | None:
     """Check in this process what every task of an evaluation or a sweep will use, before any
     is dispatched: the environment id, the seed (an int >= 0: episode k is seed + k), the
     scene, the preset and the keywords (by making one sub-environment, which compiles
     nothing), and the policy (``replay:`` specs down to the recorded one).  Raises ValueError
-    naming the input, so a bad one is one error, not the same error from every task."""
+    naming the input, so a bad one is one error, not the same error from every task.
+    Returns the policy the spec runs in the end (``replay:SPEC``: SPEC's), or None."""
     from ..envs.setup import check_seed
     if not isinstance(env_id, str) or env_id not in gym.registry \
             or not env_id.startswith("abb_gym/"):
@@ -193,10 +194,11 @@ def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
     if check_seed(seed, "seed") is None:  # episode k is seed + k: no "fresh entropy" here
         raise ValueError("seed must be an integer >= 0 (got None)")
     make_env(env_id, scene, preset, 1, **env_kwargs).close()
-    spec = policy
+    spec, resolved = policy, None
     while spec is not None:
-        resolve(spec, env_id, scene)
+        resolved = resolve(spec, env_id, scene)
         spec = spec[len("replay:"):] if spec.startswith("replay:") else None
+    return resolved
 
 
 def _innermost(policy: str, env_id: str, scene: Any):
@@ -209,7 +211,11 @@ def _innermost(policy: str, env_id: str, scene: Any):
 def policy_env_kwargs(env_id: str, scene: Any, policy: str) -> dict[str, Any]:
     """The environment keywords ``policy`` needs (an agent's ``observe_balls``,
     ``sync_vibration`` and ``frame_stack``: ``policy.env_kwargs``), also inside ``replay:``."""
-    return dict(getattr(_innermost(policy, env_id, scene), "env_kwargs", None) or {})
+    return _needs(_innermost(policy, env_id, scene))
+
+
+def _needs(inner: Any) -> dict[str, Any]:
+    return dict(getattr(inner, "env_kwargs", None) or {})
 
 
 def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwargs: Any) -> str:
@@ -220,8 +226,13 @@ def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwarg
     DwellProfile pays what RunUpSpeed pays for the same profile, interval by interval."""
     if env_id != DWELL_ID:
         return env_id
-    acts_on = getattr(_innermost(policy, env_id, scene), "acts_on", None)
-    if acts_on is None:
+    return _env_for(_innermost(policy, env_id, scene), env_id, scene, preset, env_kwargs)
+
+
+def _env_for(inner: Any, env_id: str, scene: Any, preset: str, env_kwargs: dict) -> str:
+    """:func:`policy_env_id` of the resolved innermost policy."""
+    acts_on = getattr(inner, "acts_on", None)
+    if env_id != DWELL_ID or acts_on is None:
         return env_id
     from ..envs.setup import EnvSetup
     setup = EnvSetup("dwell", scene, preset, **{k: v for k, v in env_kwargs.items()
@@ -247,9 +258,9 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     action cannot express runs on RunUpSpeed, on the same machines (:func:`policy_env_id`);
     the result's ``env_id`` says where it ran.  The environments carry the keywords the policy
     needs (:func:`policy_env_kwargs`: a trained agent's observation settings)."""
-    check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
-    env_kwargs = {**policy_env_kwargs(env_id, scene, policy), **env_kwargs}
-    env_id = policy_env_id(env_id, scene, preset, policy, **env_kwargs)
+    inner = check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
+    env_kwargs = {**_needs(inner), **env_kwargs}
+    env_id = _env_for(inner, env_id, scene, preset, env_kwargs)
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
     if executor is None:  # this process; the vector environment already uses every core
@@ -277,6 +288,5 @@ def summarise(episodes: list[dict]) -> dict[str, Any]:
             p, lo, hi = share_ci(int(np.nansum(vals)), len(vals))
             out[key] = {"mean": p, "ci_low": lo, "ci_high": hi, "n": len(vals)}
         else:
-            mean, lo, hi, n = mean_ci(vals, nonnegative=key in NONNEGATIVE)
-            out[key] = {"mean": mean, "ci_low": lo, "ci_high": hi, "n": n}
+            out[key] = mean_interval(vals, nonnegative=key in NONNEGATIVE)
     return out

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from .registry import resolve
-from .statistics import paired_difference_ci
+from .statistics import paired_interval
 
 __all__ = ["ReplayPolicy", "load_replay", "record_actions", "feedback_value"]
 
@@ -106,6 +106,5 @@ def feedback_value(policy_episodes: list[dict], replay_episodes: list[dict]
     for key in FEEDBACK_METRICS:
         a = np.array([float(r[key]) for _, r in pairs])
         b = np.array([float(p[key]) for p, _ in pairs])
-        mean, low, high, n = paired_difference_ci(a, b)
-        out[key] = {"mean": mean, "ci_low": low, "ci_high": high, "n": n}
+        out[key] = paired_interval(a, b)
     return out

@@ -16,7 +16,8 @@ import math
 import numpy as np
 from scipy import stats
 
-__all__ = ["mean_ci", "share_ci", "paired_difference_ci", "LEVEL"]
+__all__ = ["mean_ci", "share_ci", "paired_difference_ci", "mean_interval", "paired_interval",
+           "LEVEL"]
 
 LEVEL = 0.95
 
@@ -53,3 +54,17 @@ def paired_difference_ci(a, b) -> tuple[float, float, float, int]:
     if a.shape != b.shape:
         raise ValueError(f"paired values need the same episodes (shapes {a.shape} and {b.shape})")
     return mean_ci(a - b)
+
+
+def _as_dict(mean: float, low: float, high: float, n: int) -> dict[str, float]:
+    return {"mean": mean, "ci_low": low, "ci_high": high, "n": n}
+
+
+def mean_interval(values, nonnegative: bool = False) -> dict[str, float]:
+    """:func:`mean_ci` as ``{"mean", "ci_low", "ci_high", "n"}`` (the reports' form)."""
+    return _as_dict(*mean_ci(values, nonnegative=nonnegative))
+
+
+def paired_interval(a, b) -> dict[str, float]:
+    """:func:`paired_difference_ci` of ``a - b`` in the form of :func:`mean_interval`."""
+    return _as_dict(*paired_difference_ci(a, b))

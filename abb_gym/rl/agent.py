@@ -39,11 +39,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path",
-           "OBSERVATION_FIELDS"]
+from .config import OBSERVATION_FIELDS
 
-#: preset fields that shape the observation (the environment must use the agent's values)
-OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
+__all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
 
 
 def trained_dir() -> Path:
