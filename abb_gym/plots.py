@@ -92,3 +92,48 @@ def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+TRAINING_CURVE_METRICS = (("return", "held-out return (own reward) [-]"),
+                          ("residual_vibration", "residual vibration W_r/e [-]"))
+
+
+def plot_training_curves(curves: Mapping[str, Mapping[str, np.ndarray]], path: str | Path
+                         ) -> Path:
+    """Learning curves of trained agents to a PNG: one row per agent, one column per metric
+    of :data:`TRAINING_CURVE_METRICS`, mean and 95 % band of the held-out evaluations during
+    training against environment steps (the columns of a run's ``evaluations.csv``:
+    ``timesteps``, ``<metric>``, ``<metric>_ci_low``, ``<metric>_ci_high``).  Each agent
+    keeps its own axes: their rewards weigh the terms differently."""
+    if not curves:
+        raise ValueError("no training curves to plot")
+    need = ["timesteps"] + [f"{m}{s}" for m, _ in TRAINING_CURVE_METRICS
+                            for s in ("", "_ci_low", "_ci_high")]
+    for name, c in curves.items():
+        missing = [k for k in need if k not in c]
+        if missing:
+            raise ValueError(f"training curve {name!r} lacks the column(s) {missing}")
+    fig, axes = plt.subplots(len(curves), len(TRAINING_CURVE_METRICS), squeeze=False,
+                             figsize=(10, 2.2 * len(curves) + 0.8), constrained_layout=True)
+    for row, (name, c) in enumerate(curves.items()):
+        steps = np.asarray(c["timesteps"], float) / 1e6
+        for col, (metric, label) in enumerate(TRAINING_CURVE_METRICS):
+            ax = axes[row, col]
+            ax.plot(steps, c[metric], "o-", ms=3, color=f"C{col}")
+            ax.fill_between(steps, c[f"{metric}_ci_low"], c[f"{metric}_ci_high"], alpha=0.25,
+                            color=f"C{col}")
+            ax.set_title(f"{name}: {metric}", fontsize=8)
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
+            if row == len(curves) - 1:
+                ax.set_xlabel("environment steps [millions]", fontsize=8)
+            if row == 0:
+                ax.annotate(label, (0.5, 1.25), xycoords="axes fraction", ha="center",
+                            fontsize=9)
+    fig.suptitle("Training: held-out evaluations during training (mean, 95 % band)",
+                 fontsize=10)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

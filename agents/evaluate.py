@@ -1,26 +1,37 @@
 #!/usr/bin/env python
-"""Evaluate the shipped PPO agents against the strongest baselines on the seeded test set.
+"""Evaluate the shipped PPO agents against the strongest baselines on held-out machines, and
+measure the feedback gap.
 
 A thin script over :mod:`abb_gym.evaluation` (the same episodes, metrics and report as
 ``abb-gym evaluate``).  For each agent it evaluates, on the agent's environment and scene, the
-same test machines (episode k: seed + k on the ``test`` preset) under
+held-out test machines its config names (preset ``test``, or ``varied_test`` for an agent
+trained on ``varied``; episode k: seed + k) with the agent's own reward weights, under
 
 * ``ppo:<agent>`` and ``replay:ppo:<agent>`` (its own actions on the nominal machine, replayed
   open-loop: the difference is the agent's **feedback value**);
 * ``baseline:knots``, the strongest open-loop profile (CMA-ES-tuned speed knots);
 * the closed-loop hand-designed baselines ``retry`` and ``resonance_dwell``;
-* the dwell families, ``speed_reduction`` and ``ramp`` (tuned parameters from
-  ``configs/baselines/<scene>.yaml``).
+* the dwell families, ``speed_reduction`` and ``ramp``.
+
+The baselines are tuned on the agent's training preset, with its reward: ``configs/baselines``
+for ``train``, ``configs/<preset>/baselines`` for another (``configs/varied/baselines``); a
+family with no parameters tuned on that preset is left out.  For an agent trained on such a
+preset, the **oracle** (:mod:`abb_gym.baselines.oracle`: ``knots`` tuned by CMA-ES on each test
+machine alone, from the tuned ``knots``) joins the table, and a **feedback-gap** table puts the
+four families side by side: best open loop | closed-loop hand design | PPO | oracle.  The
+oracle's runs are kept in ``<out>/oracle/`` and reused while scene, preset, seed, reward and
+budget match (``--oracle-budget 0``: no oracle).
 
 On DwellProfile, the baselines its one action cannot express (every one above after tuning,
 since they carry their own run-up acceleration) run on RunUpSpeed, on the same machines
 (:func:`abb_gym.evaluation.evaluate.policy_env_id`); the tables mark the environment.
 
 It writes the report of ``abb-gym evaluate`` to ``<out>/<agent>/`` (summary.md, episodes.csv,
-evaluation.json, timeseries.png, pareto.png), ``<out>/<agent>/comparison.json`` and
-``<out>/comparison.md`` (every agent's table and the goal check), and with ``--readme FILE``
-replaces the part of FILE between ``<!-- comparison:begin -->`` and ``<!-- comparison:end -->``
-by the same text.
+evaluation.json, timeseries.png, and pareto.png: residual against settled run-up time, every
+family in one chart), ``<out>/<agent>/comparison.json`` and ``<out>/comparison.md``.  Run
+without agent names, it evaluates every shipped agent and regenerates the marked sections of
+agents/README.md (``<!-- comparison:begin/end -->``: every table) and README.md
+(``<!-- feedback-gap:begin/end -->``: the feedback-gap tables).
 
 The goal check (the project's "Tasks where feedback pays" goal), per agent, against
 ``baseline:knots`` on the same machines:
@@ -31,10 +42,9 @@ The goal check (the project's "Tasks where feedback pays" goal), per agent, agai
 * feedback value: the open-loop replay's residual at least 10 % worse, and its paired
   difference positive at 95 % confidence.
 
-    python agents/evaluate.py                                       # every shipped agent
-    python agents/evaluate.py --readme agents/README.md            # and regenerate its tables
+    python agents/evaluate.py                                # everything, READMEs included
     python agents/evaluate.py runup_speed_yoshida_odd --episodes 200 --seed 0
-    python agents/evaluate.py runs/x/s0-... --baselines knots retry
+    python agents/evaluate.py runs/x/s0-... --baselines knots retry --readme notes.md
 """
 import argparse
 import json
@@ -44,6 +54,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+REPO = Path(__file__).resolve().parents[1]
 STRONGEST_OPEN_LOOP = "knots"
 CLOSED_LOOP = ("retry", "resonance_dwell")
 DEFAULT_BASELINES = (STRONGEST_OPEN_LOOP, *CLOSED_LOOP, "speed_dwell", "accel_dwell",
@@ -51,16 +62,17 @@ DEFAULT_BASELINES = (STRONGEST_OPEN_LOOP, *CLOSED_LOOP, "speed_dwell", "accel_dw
 RESIDUAL_GOAL = 0.20   # at least 20 % lower residual than knots
 FEEDBACK_GOAL = 0.10   # the replay at least 10 % worse than the agent
 BEGIN, END = "<!-- comparison:begin -->", "<!-- comparison:end -->"
+GAP_BEGIN, GAP_END = "<!-- feedback-gap:begin -->", "<!-- feedback-gap:end -->"
+TRAINING_BEGIN, TRAINING_END = "<!-- training:begin -->", "<!-- training:end -->"
+GAP_COLUMNS = ("best open loop", "closed loop, hand-designed", "PPO (drive measurements)",
+               "oracle")
 
 
 def goal_check(ppo, replay, knots) -> dict:
     """The goal of the module docstring from three :class:`EvaluationResult` on the same
     machines."""
     from abb_gym.evaluation.replay import feedback_value
-    from abb_gym.evaluation.statistics import paired_interval
-
-    def paired(a, b, key):
-        return paired_interval([e[key] for e in a.episodes], [e[key] for e in b.episodes])
+    from abb_gym.evaluation.report import paired_gap
 
     s_ppo, s_knots = ppo.summary(), knots.summary()
     r_ppo = s_ppo["residual_vibration"]["mean"]
@@ -71,9 +83,9 @@ def goal_check(ppo, replay, knots) -> dict:
     reduction = 1.0 - r_ppo / r_knots
     return {
         "residual": {"ppo": r_ppo, "knots": r_knots, "reduction": reduction,
-                     "knots_minus_ppo": paired(knots, ppo, "residual_vibration")},
+                     "knots_minus_ppo": paired_gap(knots, ppo, "residual_vibration")},
         "run_up_time": {"ppo": t_ppo, "knots": t_knots,
-                        "ppo_minus_knots": paired(ppo, knots, "run_up_time")},
+                        "ppo_minus_knots": paired_gap(ppo, knots, "run_up_time")},
         "at_speed": {"ppo": s_ppo["at_speed"]["mean"], "knots": s_knots["at_speed"]["mean"]},
         "feedback_value": feedback,
         "goal_residual": bool(reduction >= RESIDUAL_GOAL),
@@ -85,13 +97,8 @@ def goal_check(ppo, replay, knots) -> dict:
 
 
 def _cell(stat: dict, digits: int = 3) -> str:
-    import math
-    mean, low, high = stat["mean"], stat.get("ci_low"), stat.get("ci_high")
-    if not math.isfinite(mean):
-        return "n/a"
-    if low is None or not math.isfinite(low):
-        return f"{mean:.{digits}g}"
-    return f"{mean:.{digits}g} [{low:.{digits}g}, {high:.{digits}g}]"
+    from abb_gym.evaluation.report import cell
+    return cell(stat, digits, digits)
 
 
 def agent_table(results) -> str:
@@ -126,47 +133,215 @@ def goal_line(check: dict) -> str:
             f"{_cell(fb)} W_r/e (>= 10 % and > 0 at 95 %: {yes[check['goal_feedback']]})")
 
 
-def evaluate_agent(agent: str, args) -> tuple[str, dict]:
+class AgentSetting:
+    """Where and how an agent is compared: its environment, scene, training preset, held-out
+    preset and reward weights (from its config.yml), and the baselines tuned on its training
+    preset."""
+
+    def __init__(self, agent: str, preset: str | None):
+        from abb_gym.rl.agent import resolve_agent_path
+        from abb_gym.rl.agent_files import check_folder
+        from abb_gym.rl.config import eval_env_kwargs, load_config
+        self.folder = resolve_agent_path(agent)
+        files = check_folder(self.folder)
+        self.env_id, self.scene = files.env_id, files.manifest["scene"]
+        cfg = load_config(self.folder / "config.yml", self.env_id)
+        held_out = eval_env_kwargs(cfg)
+        self.train_preset = cfg.env_kwargs.get("preset", "train")
+        self.preset = preset or held_out["preset"]
+        self.env_kwargs = {"reward": held_out["reward"]} if "reward" in held_out else {}
+        self.configs = preset_configs(self.train_preset, self.scene)
+
+    def families(self, wanted) -> list[str]:
+        """The baseline families of ``wanted`` tuned on the training preset."""
+        if self.configs is None:
+            return list(wanted)
+        import yaml
+        data = yaml.safe_load((self.configs / "baselines" / f"{self.scene}.yaml").read_text())
+        return [f for f in wanted if f in (data.get("families") or {})]
+
+
+def preset_configs(train_preset: str, scene: str) -> Path | None:
+    """The configuration folder of baselines tuned on ``train_preset`` (``configs/<preset>``),
+    or None for ``train`` (the shipped ``configs/baselines``)."""
+    from abb_gym.resources import shipped_folder
+    if train_preset == "train":
+        return None
+    folder = shipped_folder("baselines").parent / train_preset
+    if not (folder / "baselines" / f"{scene}.yaml").is_file():
+        raise ValueError(f"no baselines tuned on preset {train_preset!r} for {scene}: tune them "
+                         f"with abb-gym tune-baselines --scene {scene} --preset {train_preset} "
+                         f"--out {folder / 'baselines'}")
+    return folder
+
+
+class configs_folder:
+    """Search ``folder`` (or nothing more, for None) for configuration files inside the
+    block: the baselines an agent is compared with."""
+
+    def __init__(self, folder: Path | None):
+        self.folder = folder
+
+    def __enter__(self):
+        from abb_gym.resources import ENV_VAR
+        self.saved = os.environ.get(ENV_VAR)
+        if self.folder is not None:
+            os.environ[ENV_VAR] = str(self.folder)
+        return self
+
+    def __exit__(self, *exc):
+        from abb_gym.resources import ENV_VAR
+        if self.saved is None:
+            os.environ.pop(ENV_VAR, None)
+        else:
+            os.environ[ENV_VAR] = self.saved
+
+
+def oracle_run(setting: AgentSetting, args) -> dict:
+    """The oracle of the agent's test machines: stored in ``<out>/oracle/`` if it matches,
+    else computed (minutes: a progress bar counts the candidates) and stored."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    from abb_gym.baselines.oracle import oracle_matches, run_oracle
+    path = Path(args.out) / "oracle" / f"{setting.scene}_{setting.preset}_seed{args.seed}.json"
+    if path.is_file():
+        run = json.loads(path.read_text())
+        if oracle_matches(run, setting.scene, setting.preset, args.seed, args.episodes,
+                          args.oracle_budget, setting.env_kwargs):
+            print(f"oracle: reusing {path}", flush=True)
+            return run
+    print(f"oracle: tuning knots on each of {args.episodes} machines ({args.oracle_budget} "
+          f"candidates each) -> {path}", flush=True)
+    run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
+                     args.oracle_budget, env_kwargs=setting.env_kwargs,
+                     start=tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(run, indent=1, default=float))
+    return run
+
+
+def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args
+                ) -> tuple[str, dict]:
+    """The feedback-gap table (four families side by side) and its paired gaps."""
+    from abb_gym.evaluation.replay import feedback_value
+    from abb_gym.evaluation.report import family_table, paired_gap
+    ppo, replay = by_spec[ppo_spec], by_spec[f"replay:{ppo_spec}"]
+    knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
+    closed = [by_spec[f"baseline:{b}"] for b in CLOSED_LOOP if f"baseline:{b}" in by_spec]
+    best_closed = max(closed, key=lambda r: r.summary()["return"]["mean"])
+    columns = dict(zip(GAP_COLUMNS, (knots, best_closed, ppo, oracle)))
+    gaps = {"oracle - knots": {k: paired_gap(oracle, knots, k)
+                               for k in ("return", "residual_vibration", "run_up_time")},
+            "PPO - knots": {k: paired_gap(ppo, knots, k)
+                            for k in ("return", "residual_vibration", "run_up_time")},
+            "feedback value (replay - PPO)": feedback_value(ppo.episodes, replay.episodes)}
+    reward = setting.env_kwargs.get("reward", {})
+    text = (f"#### Feedback gap: {setting.scene}, {setting.preset} "
+            f"({setting.env_id.split('/')[-1]}, trained on {setting.train_preset})\n\n"
+            f"{args.episodes} machines (seed {args.seed}), reward weights {reward or 'default'}"
+            f", mean [95 % CI].  Best open loop and closed-loop hand design (the better return "
+            f"of {', '.join(CLOSED_LOOP)}) tuned on {setting.train_preset}; the oracle tunes "
+            f"knots on each machine alone ({args.oracle_budget} candidates, from the tuned "
+            f"knots).  Agent: `{setting.folder.name}`.\n\n" + family_table(columns) + "\n\n")
+    for name, gap in gaps.items():
+        text += f"- {name}: " + ", ".join(
+            f"{k} {_cell(v)}" for k, v in gap.items()
+            if k in ("return", "residual_vibration", "run_up_time")) + "\n"
+    return text, {"columns": {k: r.policy for k, r in columns.items()}, "gaps": gaps}
+
+
+def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
+    """(comparison text, feedback-gap text or "", report) of one agent."""
+    from abb_gym.baselines.oracle import oracle_result
     from abb_gym.evaluation.evaluate import evaluate
     from abb_gym.evaluation.report import write_report
-    from abb_gym.rl.agent import resolve_agent_path
-    from abb_gym.rl.agent_files import check_folder
 
-    folder = resolve_agent_path(agent)
-    files = check_folder(folder)
-    env_id, scene = files.env_id, files.manifest["scene"]
+    setting = AgentSetting(agent, args.preset)
     ppo_spec = f"ppo:{agent}"
-    specs = [ppo_spec, f"replay:{ppo_spec}"] + [f"baseline:{b}" for b in args.baselines]
-    results = [evaluate(env_id, scene, spec, args.episodes, args.seed, args.preset)
-               for spec in specs]
-    out = Path(args.out) / folder.name
-    write_report(results, out)
+    with configs_folder(setting.configs):
+        baselines = setting.families(args.baselines)
+        specs = [ppo_spec, f"replay:{ppo_spec}"] + [f"baseline:{b}" for b in baselines]
+        results = [evaluate(setting.env_id, setting.scene, spec, args.episodes, args.seed,
+                            setting.preset, **setting.env_kwargs) for spec in specs]
+        oracle = None
+        if setting.configs is not None and args.oracle_budget > 0 \
+                and STRONGEST_OPEN_LOOP in baselines:
+            oracle = oracle_result(oracle_run(setting, args), args.episodes)
+    out = Path(args.out) / setting.folder.name
+    write_report(results + ([oracle] if oracle else []), out)
     by_spec = dict(zip(specs, results))
     check = {}
-    if STRONGEST_OPEN_LOOP in args.baselines:
+    if STRONGEST_OPEN_LOOP in baselines:
         check = goal_check(results[0], results[1], by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"])
-    text = (f"### {folder.name}: {env_id.split('/')[-1]} on {scene}\n\n"
-            f"{args.episodes} test episodes (preset {args.preset}, seed {args.seed}), mean "
-            f"[95 % CI]; the same machines for every row.\n\n" + agent_table(results) + "\n")
+    where = (f"preset {setting.preset}" + ("" if setting.configs is None else
+                                            f", baselines tuned on {setting.train_preset}"))
+    text = (f"### {setting.folder.name}: {setting.env_id.split('/')[-1]} on {setting.scene}"
+            f"\n\n{args.episodes} test episodes ({where}, seed {args.seed}), mean "
+            f"[95 % CI]; the same machines for every row.\n\n"
+            + agent_table(results + ([oracle] if oracle else [])) + "\n")
     if check:
         text += f"\nGoal against knots: {goal_line(check)}.\n"
-    report = {"agent": folder.name, "env_id": env_id, "scene": scene,
-              "episodes": args.episodes, "seed": args.seed, "preset": args.preset,
-              "summaries": {r.policy: dict(r.summary(), env_id=r.env_id) for r in results},
-              "goal": check}
+    gap_text, gap = "", {}
+    if oracle is not None:
+        gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args)
+        text += "\n" + gap_text
+    report = {"agent": setting.folder.name, "env_id": setting.env_id, "scene": setting.scene,
+              "episodes": args.episodes, "seed": args.seed, "preset": setting.preset,
+              "train_preset": setting.train_preset, "env_kwargs": setting.env_kwargs,
+              "summaries": {r.policy: dict(r.summary(), env_id=r.env_id)
+                            for r in results + ([oracle] if oracle else [])},
+              "goal": check, "feedback_gap": gap}
     (out / "comparison.json").write_text(json.dumps(report, indent=1, default=float))
     print("\n" + text, flush=True)
-    return text, report
+    return text, gap_text, report
 
 
-def replace_between_markers(path: Path, text: str) -> None:
-    """Replace what lies between the comparison markers of ``path`` by ``text``."""
+def training_section(agents: list[str], out: Path, readme: Path | None) -> str:
+    """Every agent's training cost (its config.yml ``_run``) and its learning curves (its
+    ``evaluations.csv``, drawn to ``<out>/training_curves.png``) as Markdown."""
+    import csv
+
+    import numpy as np
+    import yaml
+
+    from abb_gym.plots import plot_training_curves
+    from abb_gym.rl.agent import resolve_agent_path
+    from abb_gym.tables import markdown_table
+    rows, curves = [], {}
+    for agent in agents:
+        folder = resolve_agent_path(agent)
+        run = yaml.safe_load((folder / "config.yml").read_text())["_run"]
+        penv = run["policy_env"]
+        rows.append({"agent": f"`{folder.name}`",
+                     "env, scene": f"{run['env_id'].split('/')[-1].removesuffix('-v0')}, "
+                                   f"{penv['scene']}",
+                     "env steps": f"{run['env_steps'] / 1e6:.2f} M"
+                                  if run["env_steps"] >= 1e5 else f"{run['env_steps']:,}",
+                     "decision interval": f"{penv['control_interval'] * 1e3:g} ms"
+                                          if penv.get("kind") != "dwell" else "one per run-up",
+                     "wall time": f"{run['wall_time_s']:.0f} s "
+                                  f"({run['wall_time_s'] / 60:.1f} min)",
+                     "env-steps/s": f"{run['env_steps_per_s']:,.0f}"})
+        with open(folder / "evaluations.csv", newline="") as fh:
+            table = list(csv.DictReader(fh))
+        curves[folder.name] = {k: np.array([float(r[k]) for r in table]) for k in table[0]}
+    png = plot_training_curves(curves, Path(out) / "training_curves.png")
+    link = os.path.relpath(png, readme.parent) if readme is not None else str(png)
+    return (markdown_table(rows) + f"\n\n![learning curves of every shipped agent]({link})\n\n"
+            "The curves are the held-out evaluations during training (64 episodes of the "
+            "agent's evaluation preset every 250 k steps; the DwellProfile agent's every few "
+            "thousand run-ups), each in its own reward; agents trained before the settled-run-up "
+            "metrics existed measured the residual with the first wave's definition.\n")
+
+
+def replace_between_markers(path: Path, text: str, begin: str = BEGIN, end: str = END
+                            ) -> None:
+    """Replace what lies between the markers ``begin`` and ``end`` of ``path`` by ``text``."""
     old = path.read_text()
-    if BEGIN not in old or END not in old:
-        raise ValueError(f"{path} has no {BEGIN} ... {END} section to regenerate")
-    head, rest = old.split(BEGIN, 1)
-    tail = rest.split(END, 1)[1]
-    path.write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}")
+    if begin not in old or end not in old:
+        raise ValueError(f"{path} has no {begin} ... {end} section to regenerate")
+    head, rest = old.split(begin, 1)
+    tail = rest.split(end, 1)[1]
+    path.write_text(f"{head}{begin}\n{text}\n{end}{tail}")
 
 
 def main(argv=None) -> int:
@@ -174,36 +349,60 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("agents", nargs="*",
                    help="shipped agent names (agents/trained/<name>) or run folders; default: "
-                        "every shipped agent")
+                        "every shipped agent, and the READMEs' sections are regenerated")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per policy")
     p.add_argument("--seed", type=int, default=0, help="seed of the test set")
-    p.add_argument("--preset", default="test", help="environment preset of the test set")
+    p.add_argument("--preset", default=None,
+                   help="environment preset of the test set (default: the agent's held-out "
+                        "preset, test or the one its config names)")
     p.add_argument("--baselines", nargs="*", default=list(DEFAULT_BASELINES),
                    help="baseline families to compare with")
+    p.add_argument("--oracle-budget", type=int, default=60,
+                   help="CMA-ES candidates per machine of the oracle (0: no oracle)")
     p.add_argument("--out", default="agents/results", help="report folder")
     p.add_argument("--readme", type=Path, default=None,
-                   help="also regenerate the comparison section of this Markdown file")
+                   help="regenerate the comparison section of this Markdown file (default "
+                        "without agent names: agents/README.md)")
+    p.add_argument("--gap-readme", type=Path, default=None,
+                   help="regenerate the feedback-gap section of this Markdown file (default "
+                        "without agent names: README.md)")
     args = p.parse_args(argv)
     from abb_gym.rl.agent import trained_dir
+    everything = not args.agents
+    if everything:
+        args.readme = args.readme or REPO / "agents" / "README.md"
+        args.gap_readme = args.gap_readme or REPO / "README.md"
     agents = args.agents or sorted(d.name for d in trained_dir().iterdir()
                                    if (d / "model.zip").exists())
     try:
         if args.episodes < 2:
             raise ValueError(f"--episodes must be >= 2 for confidence intervals "
                              f"(got {args.episodes})")
-        if args.readme is not None and not args.readme.is_file():
-            raise ValueError(f"--readme {args.readme} is not a file")
-        texts = [evaluate_agent(a, args)[0] for a in agents]
+        if args.oracle_budget < 0:
+            raise ValueError(f"--oracle-budget must be >= 0 (got {args.oracle_budget})")
+        for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):
+            if path is not None and not path.is_file():
+                raise ValueError(f"{flag} {path} is not a file")
+        parts = [evaluate_agent(a, args) for a in agents]
     except ValueError as exc:
         print(f"evaluate: error: {exc}", file=sys.stderr)
         return 2
-    body = "\n".join(texts)
+    body = "\n".join(text for text, _, _ in parts)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "comparison.md").write_text(body)
+    written = [str(Path(args.out) / "comparison.md")]
     if args.readme is not None:
         replace_between_markers(args.readme, body)
-    print(f"wrote {Path(args.out) / 'comparison.md'}"
-          + (f" and {args.readme}" if args.readme else ""))
+        if TRAINING_BEGIN in args.readme.read_text():
+            replace_between_markers(args.readme, training_section(agents, Path(args.out),
+                                                                  args.readme),
+                                    TRAINING_BEGIN, TRAINING_END)
+        written.append(str(args.readme))
+    gaps = "\n".join(gap for _, gap, _ in parts if gap)
+    if args.gap_readme is not None and gaps:
+        replace_between_markers(args.gap_readme, gaps, GAP_BEGIN, GAP_END)
+        written.append(str(args.gap_readme))
+    print("wrote " + ", ".join(written))
     return 0
 
 

@@ -23,6 +23,7 @@ pytest.importorskip("torch")
 
 from abb_gym.cli import main  # noqa: E402
 from abb_gym.rl import load_policy, make_native_env, trained_dir  # noqa: E402
+from abb_gym.rl.config import observation_kwargs  # noqa: E402
 from abb_gym.rl.agent_files import (MANIFEST, AgentError, check_folder,  # noqa: E402
                                     file_fingerprint, write_manifest)
 
@@ -75,7 +76,8 @@ def test_every_shipped_agent_has_a_current_manifest(tmp_path):
         penv = files.run["policy_env"]
         assert files.manifest["env_id"] == files.run["env_id"]
         assert files.manifest["vecnormalize"] is True and files.norm_path is not None
-        env = make_native_env(files.env_id, 1, {"scene": penv["scene"], "preset": "test"})
+        env = make_native_env(files.env_id, 1, {"scene": penv["scene"], "preset": "test",
+                                                **observation_kwargs(penv)})
         assert files.observation_names == list(env.unwrapped.setup.obs_names)
         env.close()
         # writing the manifest again over the shipped files gives the shipped manifest

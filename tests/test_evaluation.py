@@ -11,7 +11,8 @@ from abb_gym.baselines import families, profiles, tuner
 from abb_gym.cli import main
 from abb_gym.baselines.baseline_policy import BaselinePolicy, make_baseline
 from abb_gym.envs.actions import dwell_action, dwell_profile
-from abb_gym.evaluation.evaluate import evaluate, policy_env_id, summarise
+from abb_gym.evaluation.evaluate import (METRICS, EvaluationResult, evaluate, policy_env_id,
+                                         summarise)
 from abb_gym.evaluation.statistics import share_ci
 from abb_gym.evaluation.report import pareto_front, write_report
 
@@ -269,9 +270,55 @@ def test_tune_per_machine_tunes_each_test_machine_alone():
     rows = tuner.tune_per_machine("yoshida_odd", "knots", episodes=2, seed=7, preset="test",
                                   budget=8, progress=False)
     assert [r["seed"] for r in rows] == [7, 8] and all(r["candidates"] == 8 for r in rows)
+    assert [r["episode"] for r in rows] == [0, 1]
     for r in rows:
         default = tuner.evaluate_candidates("yoshida_odd", "knots", [{}], 1, r["seed"], "test")[0]
         assert r["return"] >= default["return"]
+        # every metric an evaluation reports, from the best candidate's own episode
+        assert set(METRICS) <= set(r)
+        mine = tuner.evaluate_candidates("yoshida_odd", "knots", [r["params"]], 1, r["seed"],
+                                         "test")[0]
+        for key in ("return", "run_up_time", "residual_vibration", "peak_whirl"):
+            assert r[key] == pytest.approx(mine[key], rel=1e-12, nan_ok=True)
+
+
+def test_oracle_is_an_evaluation_result_of_the_same_machines():
+    """The oracle run becomes an EvaluationResult whose episode k is machine k of the test set
+    (seed + k), so paired gaps against evaluate() pair the same machines; a stored run is
+    reused only for the same scene, preset, seed, reward, budget and enough machines."""
+    from abb_gym.baselines.oracle import oracle_matches, oracle_result, run_oracle
+    from abb_gym.evaluation.report import family_table, paired_gap
+    reward = {"reward": {"residual": 6.0}}
+    run = run_oracle("yoshida_odd", "test", episodes=3, seed=5, budget=3, env_kwargs=reward,
+                     progress=False)
+    oracle = oracle_result(run)
+    knots = evaluate("abb_gym/RunUpSpeed-v0", "yoshida_odd", "baseline:knots", 3, 5, "test",
+                     **reward)
+    assert [e["episode"] for e in oracle.episodes] == [e["episode"] for e in knots.episodes]
+    assert oracle.policy == "oracle:knots per machine"
+    assert set(oracle.summary()) == set(knots.summary())
+    gap = paired_gap(oracle, knots, "return")
+    want = np.mean([o["return"] - k["return"] for o, k in zip(oracle.episodes, knots.episodes)])
+    assert gap["mean"] == pytest.approx(want) and gap["n"] == 3
+    # pairs by episode, not by position
+    shuffled = EvaluationResult(knots.policy, knots.env_id, "yoshida_odd", "test", 5,
+                                episodes=knots.episodes[::-1])
+    assert paired_gap(oracle, shuffled, "return")["mean"] == pytest.approx(want)
+    assert oracle_result(run, episodes=2).summary()["episodes"] == 2
+    assert oracle_matches(run, "yoshida_odd", "test", 5, 3, 3, reward)
+    assert oracle_matches(run, "yoshida_odd", "test", 5, 2, 3, reward)
+    assert not oracle_matches(run, "yoshida_odd", "test", 5, 4, 3, reward)      # too few
+    assert not oracle_matches(run, "yoshida_odd", "test", 5, 3, 3, {})          # reward
+    assert not oracle_matches(run, "yoshida_odd", "test", 5, 3, 4, reward)      # budget
+    assert not oracle_matches(run, "yoshida_odd", "varied_test", 5, 3, 3, reward)
+    assert not oracle_matches({"scene": "yoshida_odd"}, "yoshida_odd", "test", 5, 3, 3, reward)
+    table = family_table({"open loop": knots, "oracle": oracle}).splitlines()
+    assert table[0].split("|")[2].strip() == "open loop"
+    assert "oracle:knots per machine" in table[2]
+    assert [line.split("|")[1].strip() for line in table[3:]] == [
+        "at_speed [share]", "run_up_time [s]", "residual_vibration [W_r/e]", "return [-]"]
+    with pytest.raises(ValueError, match="share no episode"):
+        paired_gap(oracle, EvaluationResult("x", knots.env_id, "yoshida_odd", "test", 5), "return")
 
 
 def test_tune_per_machine_from_a_start_never_ends_below_it():

@@ -93,7 +93,9 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
         import json, gymnasium as gym, numpy as np, abb_gym
         from abb_gym import resources
         assert "site-packages" in str(resources.shipped_folder("scenes")), resources.shipped_folder("scenes")
-        out = {"scenes": abb_gym.list_scenes(), "agents": resources.names("agents"), "ids": []}
+        out = {"scenes": abb_gym.list_scenes(), "agents": resources.names("agents"), "ids": [],
+               "preset_baselines": sorted(str(p.relative_to(resources.shipped_folder("baselines").parent))
+                                          for p in resources.shipped_folder("baselines").parent.glob("*/baselines/*.yaml"))}
         for env_id in abb_gym.envs.ENV_IDS:
             env = gym.make(env_id)
             env.reset(seed=0)
@@ -106,6 +108,10 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     assert set(made["agents"]) == {p.name for p in (REPO / "agents" / "trained").iterdir()
                                    if (p / "model.zip").exists()}
     assert len(made["ids"]) == 3
+    # baselines tuned on other presets (configs/<preset>/baselines: agents/evaluate.py's)
+    assert made["preset_baselines"] == sorted(
+        str(p.relative_to(REPO / "configs")) for p in (REPO / "configs").glob("*/baselines/*.yaml"))
+    assert made["preset_baselines"]
     _run([str(venv / "bin" / "abb-gym"), "evaluate", "--env", "abb_gym/RunUpSpeed-v0",
           "--scene", "yoshida_odd", "--policy", "ppo:runup_speed_yoshida_odd",
           "--policy", "baseline:speed_dwell", "--episodes", "2", "--workers", "1",

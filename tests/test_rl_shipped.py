@@ -21,7 +21,7 @@ AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "model.zip").exi
 
 
 def test_agents_are_shipped():
-    assert len(AGENTS) >= 4, f"expected the four shipped agents, found {AGENTS}"
+    assert len(AGENTS) >= 6, f"expected the six shipped agents, found {AGENTS}"
 
 
 @pytest.mark.parametrize("name", AGENTS)
@@ -33,9 +33,9 @@ def test_shipped_agent_loads_and_runs(name):
     meta = yaml.safe_load((folder / "config.yml").read_text())["_run"]
     env_id, penv = meta["env_id"], meta["policy_env"]
     pol = load_policy(name, env_id=env_id, scene=penv["scene"])
-    kwargs = dict(scene=penv["scene"], preset="test", control_interval=penv["control_interval"])
-    if penv.get("observe_balls"):
-        kwargs["observe_balls"] = True
+    # the observation settings the agent needs (observe_balls, sync_vibration, frame_stack)
+    kwargs = dict(scene=penv["scene"], preset="test", control_interval=penv["control_interval"],
+                  **pol.env_kwargs)
     env = make_native_env(env_id, 2, kwargs)
     assert pol.model.observation_space.shape == env.single_observation_space.shape
     assert pol.model.action_space.shape == env.single_action_space.shape
@@ -48,8 +48,7 @@ def test_shipped_agent_loads_and_runs(name):
     assert a.shape == (2,) + env.single_action_space.shape
     assert np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)
     # one whole test episode on the evaluation's default environment (10 ms interval)
-    extra = {"observe_balls": True} if penv.get("observe_balls") else {}
-    rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **extra)
+    rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **pol.env_kwargs)
     assert np.isfinite(rows[0]["return"])
 
 

@@ -308,11 +308,14 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     can reach with this family, not a policy.  With ``start`` (e.g. the parameters tuned on
     the training distribution) every machine's search refines them and ``start`` is one of its
     candidates, so the oracle never scores below ``start`` on any machine.  Returns one row
-    per machine (the metrics of :data:`SUMMARY_KEYS` and the parameters)."""
+    per machine: the episode of its best candidate with every metric an evaluation gives
+    (:data:`abb_gym.evaluation.evaluate.METRICS`, ``episode`` = k, ``seed`` = seed + k), plus
+    ``params`` and ``candidates`` (how many it tried)."""
     _check_counts(budget=budget, episodes=episodes)
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     family_class(family)
     scales = search_scales(scene_name, env_id, preset)
+    kw = tuple(sorted((env_kwargs or {}).items()))
     rows = []
     with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
               unit="candidate", disable=not progress) as bar:
@@ -320,7 +323,15 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
             best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
                                      preset, env_id, executor, bar, env_kwargs, start)
             _shrink_bar(bar, budget, n)
-            rows.append(dict(best, episode=k, seed=seed + k, candidates=n))
+            # the search keeps means of a few metrics; the best candidate's episode once more
+            # (deterministic: the same numbers) gives all of them
+            params = tuple(sorted((key, tuple(v) if isinstance(v, list) else v)
+                                  for key, v in best["params"].items()))
+            (row,) = _run_candidates(CandidateTask(env_id, scene_name, preset, family,
+                                                   (params,), (0,), seed + k, kw))
+            del row["candidate"]
+            rows.append(dict(row, episode=k, seed=seed + k, params=best["params"],
+                             candidates=n))
     return rows
 
 

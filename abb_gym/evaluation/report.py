@@ -29,17 +29,21 @@ import numpy as np
 from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
 from .replay import feedback_value
+from .statistics import paired_interval
 
 HEADLINE = ("at_speed", "run_up_time", "residual_vibration", "peak_whirl", "first_at_speed",
             "peak_speed", "time_above_band", "balanced", "return")
 
 
-def _cell(stat: dict) -> str:
+def cell(stat: dict, digits: int = 4, ci_digits: int = 3) -> str:
+    """``mean [low, high]`` of a :func:`~abb_gym.evaluation.statistics.mean_interval` dict
+    (``n/a`` without a finite mean; the mean alone without an interval)."""
     if not np.isfinite(stat["mean"]):
         return "n/a"
-    if not np.isfinite(stat["ci_low"]):
-        return f"{stat['mean']:.4g}"
-    return f"{stat['mean']:.4g} [{stat['ci_low']:.3g}, {stat['ci_high']:.3g}]"
+    if stat.get("ci_low") is None or not np.isfinite(stat["ci_low"]):
+        return f"{stat['mean']:.{digits}g}"
+    return (f"{stat['mean']:.{digits}g} [{stat['ci_low']:.{ci_digits}g}, "
+            f"{stat['ci_high']:.{ci_digits}g}]")
 
 
 def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEADLINE) -> str:
@@ -50,7 +54,7 @@ def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEA
         row = {"policy": r.policy, "episodes": s["episodes"]}
         if mixed:  # DwellProfile next to baselines it cannot express (evaluate.policy_env_id)
             row["env"] = r.env_id.split("/")[-1]
-        row.update({f"{k} [{UNITS[k]}]": _cell(s[k]) for k in keys})
+        row.update({f"{k} [{UNITS[k]}]": cell(s[k]) for k in keys})
         rows.append(row)
     return markdown_table(rows)
 
@@ -74,9 +78,35 @@ def feedback_values(results: Sequence[EvaluationResult]) -> dict[str, dict]:
 
 def feedback_table(values: dict[str, dict]) -> str:
     rows = [{"policy": name,
-             "residual: replay - policy [W_r/e]": _cell(v["residual_vibration"]),
-             "run-up time: replay - policy [s]": _cell(v["run_up_time"]),
-             "return: replay - policy": _cell(v["return"])} for name, v in values.items()]
+             "residual: replay - policy [W_r/e]": cell(v["residual_vibration"]),
+             "run-up time: replay - policy [s]": cell(v["run_up_time"]),
+             "return: replay - policy": cell(v["return"])} for name, v in values.items()]
+    return markdown_table(rows)
+
+
+GAP_METRICS = ("at_speed", "run_up_time", "residual_vibration", "return")
+
+
+def paired_gap(a: EvaluationResult, b: EvaluationResult, key: str) -> dict:
+    """Paired difference ``a - b`` of metric ``key`` over the episodes both ran (matched by
+    episode index: the same machines), with its 95 % interval."""
+    by_episode = {e["episode"]: e for e in b.episodes}
+    pairs = [(e, by_episode[e["episode"]]) for e in a.episodes if e["episode"] in by_episode]
+    if not pairs:
+        raise ValueError(f"{a.policy!r} and {b.policy!r} share no episode")
+    return paired_interval([float(x[key]) for x, _ in pairs], [float(y[key]) for _, y in pairs])
+
+
+def family_table(columns: dict[str, EvaluationResult], keys: Sequence[str] = GAP_METRICS
+                 ) -> str:
+    """The feedback-gap table: one column per family (e.g. best open loop, closed-loop hand
+    design, PPO, oracle), one row per metric, mean [95 % CI]; the first row names the policy
+    of each column."""
+    rows = [{"": "policy", **{label: base_name(r.policy) for label, r in columns.items()}}]
+    for key in keys:
+        row = {"": f"{key} [{UNITS[key]}]"}
+        row.update({label: cell(r.summary()[key]) for label, r in columns.items()})
+        rows.append(row)
     return markdown_table(rows)
 
 

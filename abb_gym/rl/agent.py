@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import OBSERVATION_FIELDS
+from .config import OBSERVATION_FIELDS, observation_kwargs
 
 __all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
 
@@ -100,12 +100,7 @@ class PPOPolicy:
                                   else [str(n) for n in observation_names])
         self.env_id = self.config.get("env_id")
         self.policy_env: dict[str, Any] = dict(self.config.get("policy_env") or {})
-        self.env_kwargs: dict[str, Any] = {}
-        if self.policy_env.get("observe_balls"):
-            self.env_kwargs["observe_balls"] = True
-        for key in OBSERVATION_FIELDS:  # agents saved before these existed lack them
-            if key in self.policy_env:
-                self.env_kwargs[key] = self.policy_env[key]
+        self.env_kwargs: dict[str, Any] = observation_kwargs(self.policy_env)
         self._repeat = 1
         self._single = False
         self._count: np.ndarray | None = None

@@ -323,11 +323,9 @@ def custom_objects_for(entry: Mapping[str, Any]) -> dict | None:
 
 # ------------------------------------------------------------------------ writing
 def _observation_names(env_id: str, policy_env: Mapping[str, Any]) -> list[str]:
-    from .config import make_native_env
-    kwargs = {"scene": policy_env["scene"], "preset": "test"}
-    if policy_env.get("observe_balls"):
-        kwargs["observe_balls"] = True
-    env = make_native_env(env_id, 1, kwargs)
+    from .config import make_native_env, observation_kwargs
+    env = make_native_env(env_id, 1, {"scene": policy_env["scene"], "preset": "test",
+                                      **observation_kwargs(policy_env)})
     try:
         return [str(n) for n in env.unwrapped.setup.obs_names]
     finally:

@@ -100,7 +100,7 @@ from ..configuration import (ConfigError, check, declare, fields_table, locate,
                              parse_python_literal, read_yaml, specs)
 
 __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
-           "OBSERVATION_FIELDS",
+           "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
            "zoo_problems", "TrainConfigError"]
@@ -529,6 +529,15 @@ def eval_env_kwargs(cfg: TrainConfig) -> dict[str, Any]:
         if key in env:
             out[key] = copy.deepcopy(env[key])
     out.update(copy.deepcopy(cfg.eval_env_kwargs))
+    return out
+
+
+def observation_kwargs(policy_env: Mapping[str, Any]) -> dict[str, Any]:
+    """The environment keywords that give an agent its observation (``observe_balls`` if set,
+    and the :data:`OBSERVATION_FIELDS` it was trained with), from its stored ``policy_env``;
+    agents saved before a field existed lack it and use the preset's value."""
+    out: dict[str, Any] = {"observe_balls": True} if policy_env.get("observe_balls") else {}
+    out.update({k: copy.deepcopy(policy_env[k]) for k in OBSERVATION_FIELDS if k in policy_env})
     return out
 
 

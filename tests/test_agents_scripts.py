@@ -1,0 +1,112 @@
+"""The comparison script of the checkout, ``agents/evaluate.py`` (a repository tool: the wheel
+does not ship ``agents/*.py``): each agent is compared on its own held-out machines, with its
+own reward, against baselines tuned on its training preset, and an agent trained on ``varied``
+gets the oracle and the feedback-gap table, which regenerate the READMEs' marked sections."""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytest.importorskip("stable_baselines3")
+
+REPO = Path(__file__).resolve().parents[1]
+SCRIPT = REPO / "agents" / "evaluate.py"
+pytestmark = pytest.mark.skipif(not SCRIPT.is_file(), reason="needs the checkout's agents/")
+
+
+@pytest.fixture(scope="module")
+def script():
+    spec = importlib.util.spec_from_file_location("agents_evaluate", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_each_agent_is_compared_on_its_own_held_out_machines(script):
+    plain = script.AgentSetting("runup_speed_yoshida_odd", None)
+    assert (plain.preset, plain.train_preset, plain.configs) == ("test", "train", None)
+    assert plain.env_kwargs == {"reward": {"residual": 6.0}}
+    varied = script.AgentSetting("runup_speed_yoshida_odd_varied", None)
+    assert (varied.preset, varied.train_preset) == ("varied_test", "varied")
+    assert varied.configs.name == "varied"
+    # only the families tuned on varied: no fallback to parameters tuned on another preset
+    assert varied.families(["knots", "speed_dwell", "retry"]) == ["knots", "retry"]
+    assert script.AgentSetting("runup_speed_yoshida_odd_varied", "test").preset == "test"
+    with pytest.raises(ValueError, match="tune-baselines --scene yoshida_odd --preset nowhere"):
+        script.preset_configs("nowhere", "yoshida_odd")
+
+
+def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{script.GAP_BEGIN}\nold gap\n{script.GAP_END}\nend\n")
+    agents_readme = tmp_path / "agents.md"
+    agents_readme.write_text(f"head\n{script.BEGIN}\nold tables\n{script.END}\ntail\n")
+    out = tmp_path / "results"
+    rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
+                      "3", "--baselines", "knots", "retry", "resonance_dwell", "--out",
+                      str(out), "--readme", str(agents_readme), "--gap-readme", str(readme)])
+    assert rc == 0
+    gap = readme.read_text()
+    assert gap.startswith("intro\n") and gap.endswith("end\n") and "old gap" not in gap
+    assert "#### Feedback gap: yoshida_odd, varied_test" in gap
+    header = next(line for line in gap.splitlines() if line.startswith("|  "))
+    assert [c.strip() for c in header.split("|")[2:-1]] == list(script.GAP_COLUMNS)
+    tables = agents_readme.read_text()
+    assert "old tables" not in tables and "oracle:knots per machine" in tables
+    assert "Goal against knots" in tables
+
+    report = json.loads((out / "runup_speed_yoshida_odd_varied" / "comparison.json").read_text())
+    assert report["preset"] == "varied_test" and report["train_preset"] == "varied"
+    assert report["env_kwargs"] == {"reward": {"residual": 6.0}}
+    columns = report["feedback_gap"]["columns"]
+    assert columns["best open loop"].startswith("baseline:knots")
+    assert columns["oracle"] == "oracle:knots per machine"
+    assert set(report["feedback_gap"]["gaps"]) == {
+        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)"}
+    # the baselines are those tuned on varied, not the shipped ones tuned on train
+    evaluation = json.loads((out / "runup_speed_yoshida_odd_varied" /
+                             "evaluation.json").read_text())
+    knots = next(p for p in evaluation["policies"] if p["policy"].startswith("baseline:knots"))
+    tuned = yaml.safe_load((REPO / "configs" / "varied" / "baselines" /
+                            "yoshida_odd.yaml").read_text())["families"]["knots"]["params"]
+    assert set(knots["params"]) == set(tuned)
+    for key, value in tuned.items():
+        assert knots["params"][key] == pytest.approx(value)
+    assert "oracle:knots per machine" in [p["policy"] for p in evaluation["policies"]]
+    assert (out / "runup_speed_yoshida_odd_varied" / "pareto.png").stat().st_size > 10_000
+
+    # the stored oracle serves the same machines again, and is recomputed for other ones
+    stored = out / "oracle" / "yoshida_odd_varied_test_seed0.json"
+    before = stored.stat().st_mtime_ns
+    args = argparse.Namespace(out=str(out), seed=0, episodes=2, oracle_budget=3)
+    setting = script.AgentSetting("runup_speed_yoshida_odd_varied", None)
+    capsys.readouterr()
+    with script.configs_folder(setting.configs):
+        run = script.oracle_run(setting, args)
+    assert "reusing" in capsys.readouterr().out and stored.stat().st_mtime_ns == before
+    assert len(run["machines"]) == 2
+
+
+def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):
+    from abb_gym.plots import plot_training_curves
+    from abb_gym.rl import trained_dir
+    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "model.zip").exists())
+    readme = tmp_path / "agents" / "README.md"
+    readme.parent.mkdir()
+    text = script.training_section(agents, tmp_path / "agents" / "results", readme)
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert [r.split("`")[1] for r in rows] == agents
+    for row, agent in zip(rows, agents):
+        run = yaml.safe_load((trained_dir() / agent / "config.yml").read_text())["_run"]
+        assert f"{run['wall_time_s']:.0f} s" in row
+    assert "](results/training_curves.png)" in text
+    assert (tmp_path / "agents" / "results" / "training_curves.png").stat().st_size > 20_000
+    with pytest.raises(ValueError, match="lacks the column"):
+        plot_training_curves({"x": {"timesteps": [1.0], "return": [0.0]}}, tmp_path / "x.png")
+    with pytest.raises(ValueError, match="no training curves"):
+        plot_training_curves({}, tmp_path / "x.png")
