@@ -3,7 +3,7 @@
 #                 demonstration (figures in out/demo)
 #   make test   - create .venv, install abb-gym with its training and test extras (SB3, CPU
 #                 torch, Ray), run the default test suite
-# Long runs (training, sweeps) are opt-in: make test-slow, make bench.
+# Long runs (training, sweeps, random fuzzing) are opt-in: make test-slow, make bench, make fuzz.
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -11,7 +11,7 @@ PIP := $(VENV)/bin/pip
 # torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
 PIP_INSTALL := $(PIP) install -q -c constraints.txt
 
-.PHONY: setup demo test test-slow bench kernels wheel clean
+.PHONY: setup demo test test-slow fuzz bench kernels wheel clean
 
 setup: $(VENV)/.installed
 
@@ -37,6 +37,12 @@ test: setup
 
 test-slow: setup
 	$(PY) -m pytest -q --runslow
+
+# the property-based suites with 20x the examples, new random ones each run (the default test
+# run draws the same examples every time: tests/conftest.py)
+fuzz: setup
+	ABB_GYM_FUZZ_SCALE=20 $(PY) -m pytest -q tests/test_bad_input.py tests/test_make_inputs.py \
+		tests/test_cli_inputs.py tests/test_env_inputs.py tests/test_agent_files.py
 
 bench: setup
 	$(PY) -m abb_gym.cli bench speed

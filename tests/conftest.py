@@ -1,8 +1,24 @@
-"""Shared test options: ``--runslow`` opts in to long runs marked ``@pytest.mark.slow``."""
+"""Shared test options: ``--runslow`` opts in to long runs marked ``@pytest.mark.slow``.
+
+Property-based tests (hypothesis) are deterministic by default: the same examples on every
+run, so the suite never flakes on an example no earlier run drew.  ``ABB_GYM_FUZZ_SCALE=N``
+(N > 1) hunts instead: N times the examples, new random ones each run (``make fuzz``).
+"""
+import os
+
 import matplotlib
 import pytest
 
 matplotlib.use("Agg")
+
+FUZZ_SCALE = max(1, int(os.environ.get("ABB_GYM_FUZZ_SCALE", "1")))
+try:
+    from hypothesis import settings
+except ImportError:  # the property-based tests skip themselves
+    pass
+else:
+    settings.register_profile("abb_gym", derandomize=FUZZ_SCALE == 1, database=None)
+    settings.load_profile("abb_gym")
 
 
 def pytest_addoption(parser):

@@ -68,6 +68,23 @@ def retag(folder: Path, name: str) -> None:
     path.write_text(yaml.safe_dump(data, sort_keys=False))
 
 
+@pytest.mark.parametrize("missing", ["epsilon", "clip_obs", "norm_obs", "obs_rms"])
+def test_statistics_missing_an_attribute_are_one_error_not_a_recursion(agent, missing):
+    """A damaged pickle can restore a VecNormalize without some attribute; SB3 looks a missing
+    one up on the wrapped environment, which an unpickled VecNormalize lacks, and recursed
+    without end (found by the corrupted-folder fuzz under repeated runs)."""
+    import pickle
+    path = agent / "vecnormalize.pkl"
+    with open(path, "rb") as fh:
+        vn = pickle.load(fh)
+    del vn.__dict__[missing]
+    # what VecNormalize.__getstate__ drops on saving (an unpickled one lacks them)
+    vn.__dict__.update(venv=None, class_attributes={}, returns=np.zeros(1))
+    path.write_bytes(pickle.dumps(vn))
+    retag(agent, "vecnormalize.pkl")
+    assert "vecnormalize.pkl" in load_error(agent)
+
+
 # --------------------------------------------------------------------------- shipped agents
 def test_every_shipped_agent_has_a_current_manifest(tmp_path):
     assert len(SHIPPED) >= 4

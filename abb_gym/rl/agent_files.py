@@ -272,7 +272,13 @@ def load_vecnormalize(path: Path, obs_size: int) -> Any:
                          f"({_one_line(exc)})") from None
     if not isinstance(vn, VecNormalize):
         raise AgentError(f"{label} holds a {type(vn).__name__}, not VecNormalize statistics")
-    rms = getattr(vn, "obs_rms", None)
+    # read the unpickled attributes from the instance itself: SB3's VecEnvWrapper looks a
+    # missing one up on its (absent) wrapped environment and recurses without end
+    state = vars(vn)
+    if not isinstance(state.get("norm_obs"), bool):
+        raise AgentError(f"{label} has no norm_obs flag (a VecNormalize without it cannot "
+                         f"normalise)")
+    rms = state.get("obs_rms")
     mean, var = getattr(rms, "mean", None), getattr(rms, "var", None)
     if not (isinstance(mean, np.ndarray) and isinstance(var, np.ndarray)):
         raise AgentError(f"{label} has no observation statistics (obs_rms.mean, obs_rms.var)")
@@ -281,7 +287,7 @@ def load_vecnormalize(path: Path, obs_size: int) -> Any:
                          f"observation has {obs_size} entries ({MANIFEST})")
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
         raise AgentError(f"{label} holds non-finite or negative observation statistics")
-    clip, eps = getattr(vn, "clip_obs", None), getattr(vn, "epsilon", None)
+    clip, eps = state.get("clip_obs"), state.get("epsilon")
     if not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (clip, eps)):
         raise AgentError(f"{label}: clip_obs and epsilon must be > 0 (got {clip!r}, {eps!r})")
     vn.training = False
