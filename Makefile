@@ -3,7 +3,8 @@
 #                 demonstration (figures in out/demo)
 #   make test   - create .venv, install abb-gym with its training and test extras (SB3, CPU
 #                 torch, Ray), run the default test suite
-# Long runs (training, sweeps, random fuzzing) are opt-in: make test-slow, make bench, make fuzz.
+# Long runs (training, sweeps, random fuzzing, repeats) are opt-in: make test-slow, make bench,
+# make fuzz, make repeat N=20.
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -11,7 +12,7 @@ PIP := $(VENV)/bin/pip
 # torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
 PIP_INSTALL := $(PIP) install -q -c constraints.txt
 
-.PHONY: setup demo test test-slow fuzz bench kernels wheel clean
+.PHONY: setup demo test test-slow fuzz repeat bench kernels wheel clean
 
 setup: $(VENV)/.installed
 
@@ -43,6 +44,13 @@ test-slow: setup
 fuzz: setup
 	ABB_GYM_FUZZ_SCALE=20 $(PY) -m pytest -q tests/test_bad_input.py tests/test_make_inputs.py \
 		tests/test_cli_inputs.py tests/test_env_inputs.py tests/test_agent_files.py
+
+# make test's test run N times in a row, stopping at the first failure (a flakiness hunt; run
+# it in two clones at once and each is the other's load)
+N ?= 20
+repeat: setup
+	for i in $$(seq 1 $(N)); do echo "run $$i of $(N)"; \
+		$(PY) -m pytest -q -p no:cacheprovider --runwheel || exit 1; done
 
 bench: setup
 	$(PY) -m abb_gym.cli bench speed
