@@ -153,12 +153,13 @@ class AgentSetting:
         self.configs = preset_configs(self.train_preset, self.scene)
 
     def families(self, wanted) -> list[str]:
-        """The baseline families of ``wanted`` tuned on the training preset."""
+        """The baseline families of ``wanted`` tuned on the training preset (all of them for
+        ``train``, whose untuned families run their defaults)."""
         if self.configs is None:
             return list(wanted)
-        import yaml
-        data = yaml.safe_load((self.configs / "baselines" / f"{self.scene}.yaml").read_text())
-        return [f for f in wanted if f in (data.get("families") or {})]
+        from abb_gym.baselines.baseline_policy import tuned_parameters
+        with configs_folder(self.configs):
+            return [f for f in wanted if tuned_parameters(self.scene, f) is not None]
 
 
 def preset_configs(train_preset: str, scene: str) -> Path | None:
@@ -175,26 +176,13 @@ def preset_configs(train_preset: str, scene: str) -> Path | None:
     return folder
 
 
-class configs_folder:
-    """Search ``folder`` (or nothing more, for None) for configuration files inside the
-    block: the baselines an agent is compared with."""
+def configs_folder(folder: Path | None):
+    """A block that searches ``folder`` for configuration files (the baselines an agent is
+    compared with) before the shipped ones; None: the shipped ones alone."""
+    from unittest import mock
 
-    def __init__(self, folder: Path | None):
-        self.folder = folder
-
-    def __enter__(self):
-        from abb_gym.resources import ENV_VAR
-        self.saved = os.environ.get(ENV_VAR)
-        if self.folder is not None:
-            os.environ[ENV_VAR] = str(self.folder)
-        return self
-
-    def __exit__(self, *exc):
-        from abb_gym.resources import ENV_VAR
-        if self.saved is None:
-            os.environ.pop(ENV_VAR, None)
-        else:
-            os.environ[ENV_VAR] = self.saved
+    from abb_gym.resources import ENV_VAR
+    return mock.patch.dict(os.environ, {} if folder is None else {ENV_VAR: str(folder)})
 
 
 def oracle_run(setting: AgentSetting, args) -> dict:
@@ -266,8 +254,9 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         if setting.configs is not None and args.oracle_budget > 0 \
                 and STRONGEST_OPEN_LOOP in baselines:
             oracle = oracle_result(oracle_run(setting, args), args.episodes)
+    shown = results + ([oracle] if oracle else [])
     out = Path(args.out) / setting.folder.name
-    write_report(results + ([oracle] if oracle else []), out)
+    write_report(shown, out)
     by_spec = dict(zip(specs, results))
     check = {}
     if STRONGEST_OPEN_LOOP in baselines:
@@ -277,7 +266,7 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
     text = (f"### {setting.folder.name}: {setting.env_id.split('/')[-1]} on {setting.scene}"
             f"\n\n{args.episodes} test episodes ({where}, seed {args.seed}), mean "
             f"[95 % CI]; the same machines for every row.\n\n"
-            + agent_table(results + ([oracle] if oracle else [])) + "\n")
+            + agent_table(shown) + "\n")
     if check:
         text += f"\nGoal against knots: {goal_line(check)}.\n"
     gap_text, gap = "", {}
@@ -287,8 +276,7 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
     report = {"agent": setting.folder.name, "env_id": setting.env_id, "scene": setting.scene,
               "episodes": args.episodes, "seed": args.seed, "preset": setting.preset,
               "train_preset": setting.train_preset, "env_kwargs": setting.env_kwargs,
-              "summaries": {r.policy: dict(r.summary(), env_id=r.env_id)
-                            for r in results + ([oracle] if oracle else [])},
+              "summaries": {r.policy: dict(r.summary(), env_id=r.env_id) for r in shown},
               "goal": check, "feedback_gap": gap}
     (out / "comparison.json").write_text(json.dumps(report, indent=1, default=float))
     print("\n" + text, flush=True)
@@ -301,15 +289,15 @@ def training_section(agents: list[str], out: Path, readme: Path | None) -> str:
     import csv
 
     import numpy as np
-    import yaml
 
     from abb_gym.plots import plot_training_curves
     from abb_gym.rl.agent import resolve_agent_path
+    from abb_gym.rl.agent_files import check_folder
     from abb_gym.tables import markdown_table
     rows, curves = [], {}
     for agent in agents:
         folder = resolve_agent_path(agent)
-        run = yaml.safe_load((folder / "config.yml").read_text())["_run"]
+        run = check_folder(folder).run
         penv = run["policy_env"]
         rows.append({"agent": f"`{folder.name}`",
                      "env, scene": f"{run['env_id'].split('/')[-1].removesuffix('-v0')}, "

@@ -348,7 +348,7 @@ def test_the_training_report_prints_no_nan(capsys):
 
 # ================================================================== property-based
 SCALE = max(1, int(os.environ.get("ABB_GYM_FUZZ_SCALE", "1")))
-PROPERTY = settings(deadline=None, database=None, derandomize=SCALE == 1,
+PROPERTY = settings(deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                            HealthCheck.filter_too_much])
 

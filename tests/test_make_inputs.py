@@ -239,7 +239,7 @@ def test_episode_steps_checks_what_gym_make_checks(kwargs, name):
 
 # ================================================================== property-based
 SCALE = max(1, int(os.environ.get("ABB_GYM_FUZZ_SCALE", "1")))
-PROPERTY = settings(deadline=None, database=None, derandomize=SCALE == 1,
+PROPERTY = settings(deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                            HealthCheck.filter_too_much])
 

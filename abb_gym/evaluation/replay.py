@@ -21,7 +21,8 @@ import numpy as np
 from .registry import resolve
 from .statistics import paired_interval
 
-__all__ = ["ReplayPolicy", "load_replay", "record_actions", "feedback_value"]
+__all__ = ["ReplayPolicy", "load_replay", "record_actions", "feedback_value",
+           "paired_by_episode"]
 
 FEEDBACK_METRICS = ("residual_vibration", "run_up_time", "return")
 
@@ -100,11 +101,13 @@ def feedback_value(policy_episodes: list[dict], replay_episodes: list[dict]
     95 % interval, over the episodes both ran (matched by episode index).  Positive residual
     and run-up time differences mean the policy is better than its replay; for the return, a
     negative difference does."""
-    by_episode = {e["episode"]: e for e in replay_episodes}
-    pairs = [(e, by_episode[e["episode"]]) for e in policy_episodes if e["episode"] in by_episode]
-    out = {}
-    for key in FEEDBACK_METRICS:
-        a = np.array([float(r[key]) for _, r in pairs])
-        b = np.array([float(p[key]) for p, _ in pairs])
-        out[key] = paired_interval(a, b)
-    return out
+    return {key: paired_by_episode(replay_episodes, policy_episodes, key)
+            for key in FEEDBACK_METRICS}
+
+
+def paired_by_episode(a: list[dict], b: list[dict], key: str) -> dict[str, float]:
+    """Paired difference ``a - b`` of metric ``key`` over the episodes both lists hold (matched
+    by episode index: the same machines), with its 95 % interval (NaN without a pair)."""
+    by_episode = {e["episode"]: e for e in b}
+    pairs = [(e, by_episode[e["episode"]]) for e in a if e["episode"] in by_episode]
+    return paired_interval([float(x[key]) for x, _ in pairs], [float(y[key]) for _, y in pairs])

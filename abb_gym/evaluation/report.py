@@ -28,8 +28,7 @@ import numpy as np
 
 from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
-from .replay import feedback_value
-from .statistics import paired_interval
+from .replay import feedback_value, paired_by_episode
 
 HEADLINE = ("at_speed", "run_up_time", "residual_vibration", "peak_whirl", "first_at_speed",
             "peak_speed", "time_above_band", "balanced", "return")
@@ -90,11 +89,9 @@ GAP_METRICS = ("at_speed", "run_up_time", "residual_vibration", "return")
 def paired_gap(a: EvaluationResult, b: EvaluationResult, key: str) -> dict:
     """Paired difference ``a - b`` of metric ``key`` over the episodes both ran (matched by
     episode index: the same machines), with its 95 % interval."""
-    by_episode = {e["episode"]: e for e in b.episodes}
-    pairs = [(e, by_episode[e["episode"]]) for e in a.episodes if e["episode"] in by_episode]
-    if not pairs:
+    if not {e["episode"] for e in a.episodes} & {e["episode"] for e in b.episodes}:
         raise ValueError(f"{a.policy!r} and {b.policy!r} share no episode")
-    return paired_interval([float(x[key]) for x, _ in pairs], [float(y[key]) for _, y in pairs])
+    return paired_by_episode(a.episodes, b.episodes, key)
 
 
 def family_table(columns: dict[str, EvaluationResult], keys: Sequence[str] = GAP_METRICS

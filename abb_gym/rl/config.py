@@ -105,10 +105,10 @@ __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_F
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
            "zoo_problems", "TrainConfigError"]
 
+#: preset fields that shape the observation (the environment must use the agent's values)
+OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
-#: of those, the ones that shape the observation (the environment must use the agent's values)
-OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
                  "vibration_filter_time", "dwell") + OBSERVATION_FIELDS
 ENV_KEYWORDS = ("scene", "preset", "observe_balls")
