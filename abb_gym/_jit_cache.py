@@ -27,7 +27,9 @@ PACKAGE = Path(__file__).resolve().parent
 KERNELS = PACKAGE / "_kernels"
 STAMP = KERNELS / "numba-sources.sha1"
 
-_IMPORTS_NUMBA = re.compile(rb"^\s*(from numba\b|import numba\b)", re.MULTILINE)
+# a compiled module imports numba through abb_gym._numba (which imports numba itself)
+_IMPORTS_NUMBA = re.compile(rb"^\s*(from numba\b|import numba\b|from \.+_numba import)",
+                            re.MULTILINE)
 
 
 _fingerprint: str | None = None

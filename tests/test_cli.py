@@ -62,7 +62,7 @@ def test_simulation_error_is_one_line_and_exit_1(capsys, monkeypatch):
     def diverge(*args, **kwargs):
         raise SimulationError("the state became non-finite in 'x' at t = 0.004 s", 0.004, "x")
 
-    monkeypatch.setattr("abb_gym.cli.simulate.simulate", diverge)
+    monkeypatch.setattr("abb_gym.physics.simulate", diverge)
     assert main(["simulate", "--t-end", "0.2"]) == 1
     assert "non-finite in 'x'" in _one_line(capsys.readouterr().err)
 
@@ -103,7 +103,7 @@ def _refuse(*args, **kwargs):
     ["demo", "--out", "{file}/demo"],
 ])
 def test_output_paths_are_checked_before_computing(argv, tmp_path, capsys, monkeypatch):
-    for target in ("abb_gym.cli.simulate.simulate", "abb_gym.cli.demo.simulate",
+    for target in ("abb_gym.physics.simulate", "abb_gym.cli.demo.demonstrate",
                    "abb_gym.evaluation.evaluate.evaluate", "abb_gym.analysis.stability_map",
                    "abb_gym.evaluation.studies.settling_study", "abb_gym.baselines.tuner.tune",
                    "abb_gym.benchmarks.speed.iter_speed",

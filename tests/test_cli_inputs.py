@@ -44,7 +44,7 @@ def _reached(*args, **kwargs):
     raise Reached
 
 
-STUBS = ["abb_gym.cli.demo.simulate", "abb_gym.benchmarks.speed.iter_speed",
+STUBS = ["abb_gym.cli.demo.demonstrate", "abb_gym.benchmarks.speed.iter_speed",
          "abb_gym.benchmarks.accuracy.run_accuracy", "abb_gym.analysis.stability_map",
          "abb_gym.evaluation.studies.settling_study",
          "abb_gym.evaluation.studies.ball_position_study",
@@ -162,7 +162,7 @@ def test_paths_the_system_refuses_name_the_option(path):
 
 
 def test_a_figure_format_matplotlib_cannot_write_is_refused_before_the_run(monkeypatch):
-    monkeypatch.setattr("abb_gym.cli.simulate.simulate", _reached)
+    monkeypatch.setattr("abb_gym.physics.simulate", _reached)
     line = refused(["simulate", "--plot", "run.xyz"], "--plot")
     assert "png" in line
     assert run(["simulate", "--plot", "run.svg"])[0] == "reached"

@@ -340,3 +340,44 @@ def test_train_command_has_a_tensorboard_option():
     except SystemExit:
         pytest.fail("abb-gym train has no --tensorboard-log option")
     assert args.tensorboard_log == "tb"
+
+
+# ------------------------------------------------------------- a light import
+LIGHT = """
+import sys
+import abb_gym, abb_gym.physics.methods
+from abb_gym.cli import build_parser
+parser = build_parser()
+for action in parser._actions:
+    for sub in (getattr(action, "choices", None) or {}).values():
+        if hasattr(sub, "format_help"):
+            sub.format_help()
+import gymnasium as gym
+assert "abb_gym/RunUpSpeed-v0" in gym.registry
+print(sorted(m for m in ("numba", "scipy", "torch", "matplotlib", "abb_gym.physics.model")
+             if m in sys.modules))
+"""
+
+
+def test_import_and_every_help_load_no_numba_scipy_torch_or_matplotlib():
+    """``import abb_gym`` registers the ids and ``abb-gym [COMMAND] --help`` builds every
+    parser without numba (0.2-0.3 s of the 0.5 s budget), scipy, torch or matplotlib; the
+    simulator's names load them on first use (README "Compiled kernels and the first
+    start")."""
+    out = subprocess.run([sys.executable, "-c", LIGHT], capture_output=True, text=True,
+                         env=_fresh_env(), timeout=600, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_the_simulators_names_load_on_first_use_and_stay_the_functions():
+    """``abb_gym.simulate`` is the function, also after the module of the same name was
+    imported first (importing a submodule binds it on its package)."""
+    code = ("import abb_gym.physics.simulate as m, abb_gym, abb_gym.physics as ph; "
+            "import types; from abb_gym.physics import simulate; "
+            "print(callable(simulate), simulate is abb_gym.simulate is ph.simulate, "
+            "isinstance(m, types.ModuleType), abb_gym.load_scene('yoshida_odd').name)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=_fresh_env(), timeout=600, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True", "True", "False", "yoshida_odd"]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics import SpeedProfile, load_scene, simulate
 from ..tables import markdown_table
 
 T_END = 6.0  # s, the thesis's time axis
@@ -20,9 +19,15 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..plots import plot_runup_comparison
     from .outputs import output_folder
-    out = output_folder(args.out, "--out")
+    demonstrate(output_folder(args.out, "--out"))
+    return 0
+
+
+def demonstrate(out) -> None:
+    """The demonstration's runs: figures written into the folder ``out``, the table printed."""
+    from ..physics import SpeedProfile, load_scene, simulate
+    from ..plots import plot_runup_comparison
     scene = load_scene("yoshida_odd")
     accel = 40.0
     profiles = {
@@ -58,4 +63,3 @@ def run(args) -> int:
     print(f"scene yoshida_odd: critical speed {scene.critical_speed:.1f} rad/s, "
           f"RK4 step {tr.step * 1e3:.2f} ms")
     print(markdown_table(rows))
-    return 0

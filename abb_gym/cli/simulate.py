@@ -8,9 +8,7 @@ import sys
 
 import numpy as np
 
-from ..physics import MotorDrive, SpeedProfile, load_scene, simulate
-from ..physics.scene import ANGLE_LIMIT
-from ..physics.simulate import METHODS
+from ..physics.methods import METHODS
 from ..tables import markdown_table
 
 
@@ -111,6 +109,7 @@ def check_drive_options(args) -> str:
 def build_drive(args, scene):
     """The drive the options describe; a rejected value names the options it came from (the
     API's message names its own argument: ``torque`` for ``--motor-torque``)."""
+    from ..physics import MotorDrive, SpeedProfile
     check_drive_options(args)
     if args.motor_torque is not None:
         options, make = "--motor-torque", lambda: MotorDrive.constant_torque(args.motor_torque)
@@ -138,6 +137,7 @@ def build_drive(args, scene):
 
 def ball_angles(args, scene):
     """``--ball-angles-deg`` in radians, checked in the option's own unit and words."""
+    from ..physics.scene import ANGLE_LIMIT
     if args.ball_angles_deg is None:
         return None
     deg = np.asarray(args.ball_angles_deg, float)
@@ -150,6 +150,7 @@ def ball_angles(args, scene):
 
 
 def run(args) -> int:
+    from ..physics import load_scene, simulate
     from .outputs import output_file, output_image
     scene = load_scene(args.scene, **parse_overrides(args.set))
     drive = build_drive(args, scene)

@@ -40,15 +40,43 @@ the seeded test set instead (:mod:`abb_gym.evaluation`).
 """
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 import gymnasium as gym
 
-from .base import BalancerEnv
-from .config import EnvConfig, PresetError, list_presets, load_preset
-from .dwell import DwellProfileEnv
-from .speed import RunUpSpeedEnv
-from .torque import RunUpTorqueEnv
-from .vector import (BalancerVectorEnv, DwellProfileVectorEnv, RunUpSpeedVectorEnv,
-                     RunUpTorqueVectorEnv)
+from .display import SINGLE_METADATA
+
+if TYPE_CHECKING:  # the names below load on first use (:func:`__getattr__`)
+    from .base import BalancerEnv
+    from .config import EnvConfig, PresetError, list_presets, load_preset
+    from .dwell import DwellProfileEnv
+    from .speed import RunUpSpeedEnv
+    from .torque import RunUpTorqueEnv
+    from .vector import (BalancerVectorEnv, DwellProfileVectorEnv, RunUpSpeedVectorEnv,
+                         RunUpTorqueVectorEnv)
+
+# name -> module that defines it.  Loaded on first use, so that ``import abb_gym`` registers
+# the ids without importing numba or compiling anything (README "Compiled kernels and the
+# first start": ``import abb_gym`` under 0.5 s)
+_LAZY = {"BalancerEnv": "base", "EnvConfig": "config", "PresetError": "config",
+         "list_presets": "config", "load_preset": "config", "DwellProfileEnv": "dwell",
+         "RunUpSpeedEnv": "speed", "RunUpTorqueEnv": "torque", "BalancerVectorEnv": "vector",
+         "DwellProfileVectorEnv": "vector", "RunUpSpeedVectorEnv": "vector",
+         "RunUpTorqueVectorEnv": "vector"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = ["BalancerEnv", "RunUpTorqueEnv", "RunUpSpeedEnv", "DwellProfileEnv",
            "BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
@@ -71,25 +99,27 @@ def _own_limit(env: BalancerEnv) -> gym.Env:
 def make_runup_torque(**kwargs) -> gym.Env:
     """Entry point of ``abb_gym/RunUpTorque-v0``: the environment in a ``TimeLimit`` of its
     own episode length (module docstring)."""
+    from .torque import RunUpTorqueEnv
     return _own_limit(RunUpTorqueEnv(**kwargs))
 
 
 def make_runup_speed(**kwargs) -> gym.Env:
     """Entry point of ``abb_gym/RunUpSpeed-v0``: the environment in a ``TimeLimit`` of its
     own episode length (module docstring)."""
+    from .speed import RunUpSpeedEnv
     return _own_limit(RunUpSpeedEnv(**kwargs))
 
 
 # gym.make checks render_mode against the entry point's metadata
-make_runup_torque.metadata = RunUpTorqueEnv.metadata  # type: ignore[attr-defined]
-make_runup_speed.metadata = RunUpSpeedEnv.metadata  # type: ignore[attr-defined]
+make_runup_torque.metadata = SINGLE_METADATA  # type: ignore[attr-defined]
+make_runup_speed.metadata = SINGLE_METADATA  # type: ignore[attr-defined]
 
 
 def episode_steps(env_id: str = "abb_gym/RunUpSpeed-v0", **kwargs) -> int:
     """Steps of one episode of ``env_id`` made with ``kwargs`` (scene, preset, overrides):
     ``env.spec.max_episode_steps`` of ``gym.make(env_id, **kwargs)`` without building the
     environment's buffers.  Each step is one control interval [s] (DwellProfile: one step)."""
-    from .info import check_display
+    from .display import check_display
     from .setup import EnvSetup, check_flag
     kinds = {"abb_gym/RunUpTorque-v0": "torque", "abb_gym/RunUpSpeed-v0": "speed",
              "abb_gym/DwellProfile-v0": "dwell"}
@@ -98,7 +128,7 @@ def episode_steps(env_id: str = "abb_gym/RunUpSpeed-v0", **kwargs) -> int:
     kw = dict(kwargs)
     # no effect on the length, but checked as gym.make checks them: a keyword gym.make
     # refuses is refused here too, never silently ignored
-    check_display(kw.pop("render_mode", None), BalancerEnv.metadata["render_modes"],
+    check_display(kw.pop("render_mode", None), SINGLE_METADATA["render_modes"],
                   kw.pop("info_level", "lean"))
     check_flag(kw.pop("record_history", False), "record_history")
     setup = EnvSetup(kinds[env_id], kw.pop("scene", "yoshida_odd"), kw.pop("preset", "train"),

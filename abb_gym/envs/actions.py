@@ -22,8 +22,8 @@ import math
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from .._numba import njit
 from ..physics import drive_law as dl
 from ..physics.drives import SpeedProfile
 from .config import PresetError

@@ -17,7 +17,8 @@ from gymnasium import logger
 from gymnasium.utils import seeding
 
 from .actions import as_action_array
-from .info import RenderModes, check_display, step_info
+from .display import SINGLE_METADATA, check_display
+from .info import step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
@@ -207,7 +208,7 @@ __doc__ += COMMON_DOC
 class BalancerEnv(SetupAccess, gym.Env):
     """Common implementation; use the registered subclasses."""
 
-    metadata = {"render_modes": RenderModes(["human", "rgb_array"]), "render_fps": 25}
+    metadata = SINGLE_METADATA
     kind = "speed"
 
     def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,

@@ -15,47 +15,7 @@ from ..physics import runup
 from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
                      TERM_NAMES)
 
-__all__ = ["step_info", "masked", "INFO_LEVELS", "check_info_level", "check_display",
-           "RenderModes"]
-
-INFO_LEVELS = ("lean", "full")
-
-
-def check_info_level(level: Any) -> str:
-    """``level`` if it is one of :data:`INFO_LEVELS`, else a ValueError naming them."""
-    # text first: ``in`` on an array is ambiguous, and a list is unhashable
-    if not isinstance(level, str) or level not in INFO_LEVELS:
-        raise ValueError(f"info_level must be one of {INFO_LEVELS} (got {level!r})")
-    return level
-
-
-class RenderModes(list):
-    """The ``metadata["render_modes"]`` of the environments: a list whose ``in`` is true for
-    any value that is not text.
-
-    ``gym.make`` checks ``render_mode`` against the entry point's modes before it calls it,
-    and for a mode not in the list it calls ``render_mode.endswith(...)``: ``render_mode=True``
-    or ``b"x"`` would end in gymnasium's AttributeError or TypeError instead of the
-    environment's ValueError.  Such values pass gymnasium's ``in`` and reach
-    :func:`check_display`, which names ``render_mode``; text behaves as in a plain list
-    ("human" and "rgb_array_list" get gymnasium's wrappers, other text a ValueError)."""
-
-    def __contains__(self, value: Any) -> bool:
-        if not isinstance(value, str):
-            return True
-        return list.__contains__(self, value)
-
-
-def check_display(render_mode: Any, render_modes: list[str], info_level: Any) -> str:
-    """The checks of the single and the vector environment's ``render_mode`` and
-    ``info_level`` arguments; returns the info level."""
-    # text first (``in`` on an array is ambiguous; :class:`RenderModes` lets any non-text
-    # value through its own ``in``, so that it reaches this check)
-    if render_mode is not None and (not isinstance(render_mode, str)
-                                    or not any(render_mode == m for m in render_modes)):
-        raise ValueError(f"render_mode must be None or one of {render_modes} "
-                         f"(got {render_mode!r})")
-    return check_info_level(info_level)
+__all__ = ["step_info", "masked"]
 
 # key -> (buffer, column, conversion): the one definition of every per-step key
 #   "value": the entry; "bool": entry != 0; "times_dt": entry x control interval [s];

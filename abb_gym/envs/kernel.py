@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit, prange
+from .._numba import njit, prange
 
 from ..physics.specialise import Specialised
 

@@ -74,7 +74,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import as_action_array
-from .info import check_display, masked, step_info
+from .display import check_display
+from .info import masked, step_info
 from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
 from . import episodes

@@ -1,7 +1,50 @@
-"""Physics of the rotor with an automatic ball balancer: scenes, equations, drives, integrators."""
-from .drives import MotorDrive, SpeedProfile
-from .scene import Scene, SceneError, list_scenes, load_scene
-from .simulate import SimulationError, Trajectory, simulate
+"""Physics of the rotor with an automatic ball balancer: scenes, equations, drives, integrators.
+
+The names below load on first use, numba and the compiled modules with them, so that a light
+submodule (:mod:`~abb_gym.physics.methods`) and ``abb-gym --help`` need neither.
+"""
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .drives import MotorDrive, SpeedProfile
+    from .scene import Scene, SceneError, list_scenes, load_scene
+    from .simulate import SimulationError, Trajectory, simulate
 
 __all__ = ["MotorDrive", "SpeedProfile", "Scene", "SceneError", "list_scenes", "load_scene",
            "SimulationError", "Trajectory", "simulate"]
+
+_HOME = {"MotorDrive": "drives", "SpeedProfile": "drives", "Scene": "scene",
+         "SceneError": "scene", "list_scenes": "scene", "load_scene": "scene",
+         "SimulationError": "simulate", "Trajectory": "simulate", "simulate": "simulate"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _HOME:
+        value = getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOME))
+
+
+class _Package(types.ModuleType):
+    """This package, whose ``simulate`` stays the function.
+
+    Importing a submodule binds it on its package, so the first import of the module
+    :mod:`abb_gym.physics.simulate` (by anything) would make ``abb_gym.physics.simulate`` the
+    module instead of the function it exports, as an eager ``from .simulate import simulate``
+    used to rebind it."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if isinstance(value, types.ModuleType) and _HOME.get(name) == name:
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

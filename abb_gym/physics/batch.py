@@ -51,7 +51,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from .._numba import njit, prange
 
 from . import drive_law as dl
 from . import integrators as integ

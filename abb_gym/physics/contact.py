@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from .._numba import njit
 
 TWO_PI = 2.0 * math.pi
 

@@ -42,7 +42,7 @@ A row with ``D_WNL`` or ``D_PLIM`` set needs the envelope: ``model.spec_of`` the
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 (D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM, D_WNL,
  D_PLIM) = range(12)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import llvmlite.binding as _llvm
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 for _option in ("-unroll-threshold=2000", "-vectorize-memory-check-threshold=100000"):
     _llvm.set_option("abb_gym", _option)

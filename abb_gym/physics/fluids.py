@@ -77,7 +77,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 __all__ = ["Fluid", "FLUIDS", "DRAG_LAWS", "fluid_properties", "drag_coefficient",
            "law_coefficients", "stokes_drag_coefficient", "SPANNAN_6_9_PRINTED", "RE_STOKES",

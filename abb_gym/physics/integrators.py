@@ -33,10 +33,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 from . import drive_law as dl
 from . import elementary as el
 from . import model as mdl
+from .methods import (ADAPTIVE, FIXED_STEP, METHOD_DOPRI5, METHOD_ETDRK4,  # noqa: F401
+                      METHOD_IDS, METHOD_RK4, METHOD_ROS2)
 from .specialise import Specialised
 
 STATUS_OK = 0
@@ -44,14 +46,6 @@ STATUS_NONFINITE = 1
 STATUS_STEP_UNDERFLOW = 2
 STATUS_WORK_LIMIT = 3  # solve_ivp used more right-hand sides than it was allowed
 
-METHOD_RK4 = 0
-METHOD_DOPRI5 = 1
-METHOD_ROS2 = 2
-METHOD_ETDRK4 = 3
-METHOD_IDS = {"rk4": METHOD_RK4, "dopri5": METHOD_DOPRI5, "etdrk4": METHOD_ETDRK4,
-              "ros2": METHOD_ROS2}
-FIXED_STEP = ("rk4", "etdrk4", "ros2")
-ADAPTIVE = ("dopri5",)
 
 
 # --------------------------------------------------------------------------- helpers

@@ -102,7 +102,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 from . import contact as _contact
 from . import elementary as el

@@ -61,7 +61,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 from scipy.integrate import solve_ivp
 from scipy.optimize import root
 

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 __all__ = ["BAND", "SETTLE_TIME", "N_ACC", "new_accumulator", "reset", "update", "in_band",
            "run_up_time", "residual", "peak_vibration", "stream_metrics"]

@@ -8,11 +8,12 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 from . import integrators as integ
 from . import drive_law as dl
 from . import model as mdl
+from .methods import COMPILED_METHODS, METHODS  # noqa: F401  (METHODS: part of this API)
 from .drives import MotorDrive, SpeedProfile, _finite, is_sequence
 from .scene import ANGLE_LIMIT, Scene, load_scene
 from .specialise import resolve_kernel
@@ -21,9 +22,6 @@ __all__ = ["simulate", "Trajectory", "SimulationError", "default_step", "stiff_r
            "stiff_rates", "explicit_rate", "default_max_steps", "step_cost", "max_output_samples",
            "initial_state", "state_scale", "METHODS"]
 
-COMPILED_METHODS = tuple(integ.METHOD_IDS)
-SCIPY_METHODS = ("DOP853", "Radau", "RK45", "LSODA", "BDF")
-METHODS = COMPILED_METHODS + SCIPY_METHODS
 
 
 class SimulationError(FloatingPointError):

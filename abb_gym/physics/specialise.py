@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from contextlib import contextmanager
 
 import numpy as np
-from numba import typeof, types
+from .._numba import typeof, types
 
 __all__ = ["Specialised", "compile_notice", "resolve_kernel", "KERNELS"]
 
