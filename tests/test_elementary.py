@@ -82,3 +82,44 @@ def test_tanh_within_6_ulp_relative_everywhere(scale):
     assert _ulps(got, np.tanh(x)).max() <= 7.0
     assert np.array_equal(_tanh_all(-x), -got)
     assert np.all(np.abs(got) <= 1.0)
+
+
+# ------------------------------------------------------------------ no-alias kernels
+def _argument_attributes(fn, sig) -> str:
+    """The LLVM ``define`` line of ``fn`` compiled for ``sig`` (its argument attributes)."""
+    fn.compile(sig)
+    ir = fn.inspect_llvm(fn.signatures[-1])
+    # the function itself (numba's calling convention: return pointer first), not its wrappers
+    return next(line for line in ir.splitlines()
+                if line.startswith("define") and "%retptr" in line)
+
+
+def test_noalias_reaches_the_compiler_only_when_asked():
+    """``njit(noalias=True)`` of abb_gym._numba marks the array data pointers ``noalias`` in
+    the compiled function (the promise that spares the lane loops their overlap checks); a
+    plain ``njit`` does not."""
+    from abb_gym._numba import NOALIAS, njit
+    if not NOALIAS:
+        pytest.skip("this numba has no noalias compiler flag")
+
+    def axpy(x, y):
+        for i in range(x.shape[0]):
+            y[i] += 2.0 * x[i]
+
+    sig = "void(float64[::1], float64[::1])"
+    marked = _argument_attributes(njit(noalias=True)(axpy), sig)
+    plain = _argument_attributes(njit(axpy), sig)
+    # numba marks its return and exception pointers noalias in both; the arrays add theirs
+    assert marked.count("noalias") >= plain.count("noalias") + 2, (marked, plain)
+
+
+def test_the_lane_loops_are_compiled_without_alias_checks():
+    """The right-hand side, the drag rates and the RK4/ETDRK4 steps carry the option (their
+    callers never pass overlapping arrays; the single, vector and simulate paths that run
+    them agree bit for bit in tests/test_envs_batch.py)."""
+    from abb_gym._numba import NOALIAS
+    from abb_gym.physics import integrators as integ
+    from abb_gym.physics import model as mdl
+    for fn in (mdl.accelerations_block, mdl.drag_rates_block, integ._rk4_step,
+               integ._etdrk4_step):
+        assert fn.targetoptions.get("noalias", False) is NOALIAS, fn.py_func.__name__

@@ -361,7 +361,7 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     return colx, coly, ci, ii, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", noalias=True)
 def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     """The equations of motion, once, for a block of lanes (one environment per lane):
     ``ds[:, l]`` = d(state)/dt of lane ``l`` at time ``t[l]``.
@@ -374,7 +374,8 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     lane loop compiles to straight-line code over all lanes at once (AVX2: four lanes per instruction,
     with the LLVM options of :mod:`abb_gym.physics.elementary`); with run-time values it is
     the general kernel.  Either way every lane does the same arithmetic in the same order, so
-    the results agree bit for bit.
+    the results agree bit for bit.  No two array arguments may overlap (compiled ``noalias``,
+    which spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
     ball; each ball's terms (generalised force, coupling columns, inverse inertia) are kept
@@ -604,7 +605,7 @@ def total_energy(s, p, b):
     return e
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", noalias=True)
 def drag_rates_block(t, s, p, b, d, lam, nb, spec):
     """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state rows x
     lanes; every other row 0): for ball i, lam[ph_i'] = (beta_i + d(resisting force) /
@@ -624,8 +625,8 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
 
     This is the stiff, nearly diagonal part of the Jacobian (the coupling through the rotor,
     of relative size m_i / M, is left out); the exponential integrator treats it exactly and
-    the step-size rule of the explicit methods bounds h * lam.  Lanes as in
-    :func:`accelerations_block`."""
+    the step-size rule of the explicit methods bounds h * lam.  Lanes, and arrays that must
+    not overlap, as in :func:`accelerations_block`."""
     L = s.shape[1]
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
