@@ -5,9 +5,9 @@
 so that the import and ``abb-gym --help`` stay under half a second (README "Compiled kernels
 and the first start").
 """
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from ._lazy import lazy_names
 from ._threads import quiet_openmp
 
 # idle OpenMP workers (numba's, torch's) otherwise spin after each parallel environment step
@@ -25,16 +25,5 @@ __version__ = "0.1.0"
 __all__ = ["MotorDrive", "Scene", "SceneError", "SimulationError", "SpeedProfile", "Trajectory",
            "list_scenes", "load_scene", "simulate", "envs", "__version__"]
 
-_PHYSICS = frozenset(__all__) - {"envs", "__version__"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _PHYSICS:
-        value = getattr(importlib.import_module(".physics", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | _PHYSICS)
+__getattr__, __dir__ = lazy_names(__name__, {name: "physics" for name in __all__
+                                            if name not in ("envs", "__version__")})

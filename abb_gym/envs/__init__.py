@@ -40,11 +40,11 @@ the seeded test set instead (:mod:`abb_gym.evaluation`).
 """
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 
+from .._lazy import lazy_names
 from .display import SINGLE_METADATA
 
 if TYPE_CHECKING:  # the names below load on first use (:func:`__getattr__`)
@@ -66,16 +66,7 @@ _LAZY = {"BalancerEnv": "base", "EnvConfig": "config", "PresetError": "config",
          "RunUpTorqueVectorEnv": "vector"}
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY)
 
 
 __all__ = ["BalancerEnv", "RunUpTorqueEnv", "RunUpSpeedEnv", "DwellProfileEnv",

@@ -3,10 +3,11 @@
 The names below load on first use, numba and the compiled modules with them, so that a light
 submodule (:mod:`~abb_gym.physics.methods`) and ``abb-gym --help`` need neither.
 """
-import importlib
 import sys
 import types
 from typing import TYPE_CHECKING, Any
+
+from .._lazy import lazy_names
 
 if TYPE_CHECKING:
     from .drives import MotorDrive, SpeedProfile
@@ -21,16 +22,7 @@ _HOME = {"MotorDrive": "drives", "SpeedProfile": "drives", "Scene": "scene",
          "SimulationError": "simulate", "Trajectory": "simulate", "simulate": "simulate"}
 
 
-def __getattr__(name: str) -> Any:
-    if name in _HOME:
-        value = getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_HOME))
+__getattr__, __dir__ = lazy_names(__name__, _HOME)
 
 
 class _Package(types.ModuleType):
