@@ -18,7 +18,7 @@ from gymnasium import spaces
 
 from ..physics import batch
 from ..physics import drive_law as dl
-from ..physics import integrators as integ
+from ..physics.methods import METHOD_IDS
 from ..physics import model as mdl
 from ..physics import rotor
 from ..physics.scene import Scene, load_scene
@@ -355,7 +355,7 @@ class EnvSetup:
         c[C_VIB_HI] = self.vibration_bound
         c[C_BAL_TOL] = cfg.balance_tolerance
         c[C_TEP] = self.episode_length
-        c[C_METHOD] = integ.METHOD_IDS[cfg.integrator]
+        c[C_METHOD] = METHOD_IDS[cfg.integrator]
         sync = cfg.sync_vibration
         c[C_SYNC] = 1.0 if sync.enabled else 0.0
         c[C_SYNC_LAG] = sync.lag

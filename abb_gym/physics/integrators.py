@@ -1,7 +1,8 @@
 """Integrators behind one interface, all over one right-hand side
 (:func:`abb_gym.physics.model.accelerations_block`).
 
-Compiled (numba), chosen by :data:`METHOD_IDS` and run by :func:`run`:
+Compiled (numba), chosen by :data:`~abb_gym.physics.methods.METHOD_IDS` and run by
+:func:`run`:
 
 * ``"rk4"`` - classical fixed-step Runge-Kutta, order 4.  Explicit: its real-axis stability
   limit h * rate < 2.79 is set by the ball drag (rate ~ c_b / (1.4 m)) and, through the
@@ -37,8 +38,7 @@ from .._numba import njit
 from . import drive_law as dl
 from . import elementary as el
 from . import model as mdl
-from .methods import (ADAPTIVE, FIXED_STEP, METHOD_DOPRI5, METHOD_ETDRK4,  # noqa: F401
-                      METHOD_IDS, METHOD_RK4, METHOD_ROS2)
+from .methods import METHOD_DOPRI5, METHOD_ETDRK4, METHOD_RK4
 from .specialise import Specialised
 
 STATUS_OK = 0
@@ -335,7 +335,7 @@ def _dopri5_attempt(t, h, s, p2, b3, d, k, tmp, work, tt, s_new, rtol, atol, nb,
 def _run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec):
     """Integrate from ``t_out[0]``; write the state at each ``t_out[k]`` into ``out[k]``.
 
-    ``method`` is a value of :data:`METHOD_IDS`; ``h`` the fixed step (or the first trial step
+    ``method`` is a value of :data:`~abb_gym.physics.methods.METHOD_IDS`; ``h`` the fixed step (or the first trial step
     of the adaptive method) [s]; ``rtol`` and ``atol`` (array) are used by the adaptive
     method only.  ``seg_t`` are segment start times (ascending, ``seg_t[0] <= t_out[0]``) and
     ``seg_d`` the drive rows; ``spec`` the kernel's ``SPEC_*`` bits

@@ -4,7 +4,7 @@ loading numba).  The methods themselves: :mod:`abb_gym.physics.integrators` (com
 from __future__ import annotations
 
 __all__ = ["METHOD_RK4", "METHOD_DOPRI5", "METHOD_ROS2", "METHOD_ETDRK4", "METHOD_IDS",
-           "FIXED_STEP", "ADAPTIVE", "COMPILED_METHODS", "SCIPY_METHODS", "METHODS"]
+           "FIXED_STEP", "COMPILED_METHODS", "SCIPY_METHODS", "METHODS"]
 
 # integer ids the compiled kernels branch on
 METHOD_RK4 = 0
@@ -14,7 +14,6 @@ METHOD_ETDRK4 = 3
 METHOD_IDS = {"rk4": METHOD_RK4, "dopri5": METHOD_DOPRI5, "etdrk4": METHOD_ETDRK4,
               "ros2": METHOD_ROS2}
 FIXED_STEP = ("rk4", "etdrk4", "ros2")
-ADAPTIVE = ("dopri5",)
 
 COMPILED_METHODS = tuple(METHOD_IDS)
 SCIPY_METHODS = ("DOP853", "Radau", "RK45", "LSODA", "BDF")

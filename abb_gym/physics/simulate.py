@@ -13,7 +13,7 @@ from .._numba import njit
 from . import integrators as integ
 from . import drive_law as dl
 from . import model as mdl
-from .methods import COMPILED_METHODS, METHODS  # noqa: F401  (METHODS: part of this API)
+from .methods import COMPILED_METHODS, FIXED_STEP, METHOD_IDS, METHODS
 from .drives import MotorDrive, SpeedProfile, _finite, is_sequence
 from .scene import ANGLE_LIMIT, Scene, load_scene
 from .specialise import resolve_kernel
@@ -374,7 +374,7 @@ def _check_work(scene: Scene, drive, method: str, t_end: float, t_out: np.ndarra
     intervals = len(t_out) - 1
     interval = float(t_out[1] - t_out[0])  # a Python float: overflow is inf, not a warning
     rate = 0.0
-    if method in integ.FIXED_STEP:
+    if method in FIXED_STEP:
         ratio = interval / dt if dt > 0 else math.inf
         steps = intervals * max(1, math.ceil(ratio - 1e-9)) + n_segments \
             if ratio <= max_steps else math.inf
@@ -397,9 +397,9 @@ def _check_work(scene: Scene, drive, method: str, t_end: float, t_out: np.ndarra
     if steps <= max_steps:
         return
     omega = _fastest_rotation(scene, max_speed)
-    if method in integ.FIXED_STEP and not default_dt:
+    if method in FIXED_STEP and not default_dt:
         how = "use a larger dt or a shorter t_end"
-    elif method in integ.FIXED_STEP:
+    elif method in FIXED_STEP:
         rate = stiff_rate(scene, max_speed) if method == "rk4" else 0.0
         other = explicit_rate(scene, drive) if method != "ros2" else 0.0
         rotation = ROTATION_PER_STEP[method] / omega
@@ -577,9 +577,9 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         # scene pays off only over many runs)
         run = integ.run if specialised else integ.run.generic
         status, t_fail, bad, work = run(
-            integ.METHOD_IDS[method], s0, t_out, seg_t, seg_d, p, b, float(dt), float(rtol),
+            METHOD_IDS[method], s0, t_out, seg_t, seg_d, p, b, float(dt), float(rtol),
             atol_arr, out, b.shape[0], mdl.spec_of(p, seg_d))
-        if method in integ.FIXED_STEP:
+        if method in FIXED_STEP:
             # the step actually taken: an output interval is split into equal steps <= dt
             interval = t_out[1] - t_out[0]
             dt = interval / max(1, math.ceil(interval / dt - 1e-9))
