@@ -13,8 +13,9 @@ fifty array rows and write fifteen; without the promise LLVM guards its vector l
 overlap checks between them, about 1.5 us per call, and skips the vector loop altogether
 below 48 lanes (``python -m abb_gym.benchmarks.rhs_cost``).  A function marked so must
 never be called with overlapping arrays (distinct views of one buffer that do not overlap are
-fine); each says so in its docstring.  On a numba without the flag the option is dropped
-(same results, the old speed).
+fine); each says so in its docstring.  On a numba without the flag the option is dropped and
+LLVM gets the large check budget the kernels used before (:func:`allow_overlap_checks`):
+same results, the old speed.
 """
 from ._jit_cache import flush_if_sources_changed, install_locator
 
@@ -24,7 +25,7 @@ flush_if_sources_changed()
 import numba  # noqa: E402
 from numba import prange, typeof, types  # noqa: E402
 
-__all__ = ["njit", "prange", "typeof", "types", "NOALIAS"]
+__all__ = ["njit", "prange", "typeof", "types", "NOALIAS", "allow_overlap_checks"]
 
 
 def _allow_noalias() -> bool:
@@ -41,8 +42,18 @@ def _allow_noalias() -> bool:
     return True
 
 
+def allow_overlap_checks() -> None:
+    """Let LLVM guard a vector loop with as many run-time overlap checks as the lane loops need
+    without the no-alias promise (its default budget is too small for the equations of
+    motion).  Process wide: it applies to everything compiled afterwards."""
+    import llvmlite.binding as llvm
+    llvm.set_option("abb_gym", "-vectorize-memory-check-threshold=100000")
+
+
 #: whether ``njit(noalias=True)`` reaches the compiler on this numba
 NOALIAS = _allow_noalias()
+if not NOALIAS:  # pragma: no cover - the lane loops then vectorise behind run-time checks
+    allow_overlap_checks()
 
 
 def njit(*args, noalias: bool = False, **options):
