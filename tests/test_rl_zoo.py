@@ -49,7 +49,7 @@ def test_shipped_configs_are_in_the_zoo_format():
 
 
 @pytest.mark.parametrize("change, match", [
-    ({"policy": "BoundedMlpPolicy"}, r"'policy': 'BoundedMlpPolicy' is not an SB3 PPO policy "
+    ({"policy": "BoundedMlpPolicy"}, r"'policy': 'BoundedMlpPolicy' is not an SB3 policy "
                                      r"name .* import path: abb_gym.rl.networks.BoundedMlpPolicy"),
     ({"policy": "abb_gym.rl.networks.NoSuchPolicy"}, r"'policy': rl_zoo3 cannot import"),
     ({"policy": "no_such_package.Policy"}, r"cannot import the class .*no_such_package"),
@@ -152,15 +152,16 @@ def _zoo_env() -> dict[str, str]:
 def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
     pytest.importorskip("rl_zoo3", reason="rl_zoo3 is not installed (pip install -c "
                                           "constraints.txt rl_zoo3): the zoo cannot be run")
-    from stable_baselines3 import PPO
     from torch import nn
-    from abb_gym.rl.networks import POLICIES
+    from abb_gym.rl.config import algorithm_class
+    from abb_gym.rl.networks import policy_class
 
     cfg = load_config(path, env_id)
+    algorithm = algorithm_class(cfg.algo)
     kw = cfg.ppo_kwargs()
     rollout = kw["n_steps"] * cfg.n_envs
     # the zoo always completes a rollout: -n of one rollout = one rollout and one PPO update
-    cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", env_id,
+    cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", cfg.algo, "--env", env_id,
            "--gym-packages", "abb_gym", "-conf", str(path), "-n", str(rollout),
            "-f", str(tmp_path / "logs"), "--seed", "0"]
     t0 = time.perf_counter()
@@ -170,8 +171,8 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
     assert proc.returncode == 0, (f"{' '.join(cmd)} failed:\n{proc.stdout[-3000:]}\n"
                                   f"{proc.stderr[-3000:]}")
     name = env_id.replace("/", "-")
-    run = tmp_path / "logs" / "ppo" / f"{name}_1"
-    model = PPO.load(run / f"{name}.zip", device="cpu")
+    run = tmp_path / "logs" / cfg.algo / f"{name}_1"
+    model = algorithm.load(run / f"{name}.zip", device="cpu")
     print(f"{path.name}: rl_zoo3 run of {model.num_timesteps} steps in {wall:.1f} s")
 
     # the hyperparameters abb-gym train reads from the same file
@@ -186,9 +187,9 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
             assert schedule(p) == pytest.approx(expect(p)), key
     # the policy abb-gym train builds: class, network, activation, bounded initial mean
     pk = resolve_policy_kwargs(cfg.policy_kwargs)
-    expected_class = POLICIES[cfg.policy]
+    expected_class = policy_class(cfg.policy)
     if isinstance(expected_class, str):
-        expected_class = PPO.policy_aliases[expected_class]
+        expected_class = algorithm.policy_aliases[expected_class]
     assert type(model.policy) is expected_class
     assert model.policy.net_arch == pk["net_arch"]
     assert model.policy.activation_fn is pk["activation_fn"]

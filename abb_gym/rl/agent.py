@@ -19,6 +19,10 @@ vector environment.  The VecNormalize statistics are frozen (``training=False,
 norm_reward=False``): evaluation never updates them.  Actions are the deterministic policy
 mean unless ``deterministic=False``.
 
+A recurrent agent (sb3-contrib's ``RecurrentPPO``, an LSTM policy) keeps one memory per
+sub-environment: ``reset(env, mask)`` starts it afresh for the sub-environments in ``mask``,
+and a sub-environment's memory advances only when it decides (once per held action).
+
 Environment checks (``reset``): the observation and action shapes must equal the agent's
 (``observe_balls`` in particular), the observation layout the one recorded in ``agent.yml``,
 and the policy-relevant preset fields
@@ -105,6 +109,11 @@ class PPOPolicy:
         self._single = False
         self._count: np.ndarray | None = None
         self._last: np.ndarray | None = None
+        # a recurrent policy (RecurrentPPO): its LSTM state (h, c), each (layers, n, hidden),
+        # and which sub-environments start an episode at their next decision
+        self.recurrent = hasattr(getattr(model, "policy", None), "lstm_hidden_state_shape")
+        self._state: tuple[np.ndarray, ...] | None = None
+        self._starts: np.ndarray | None = None
 
     # ------------------------------------------------------------------ checks
     def check_env(self, env: Any) -> int:
@@ -179,16 +188,35 @@ class PPOPolicy:
             self._count = np.zeros(n, dtype=np.int64)
             self._last = np.zeros((n,) + tuple(self.model.action_space.shape),
                                   dtype=np.float32)
+            if self.recurrent:
+                layers, _, hidden = self.model.policy.lstm_hidden_state_shape
+                self._state = tuple(np.zeros((layers, n, hidden), dtype=np.float32)
+                                    for _ in range(2))
+                self._starts = np.ones(n, dtype=bool)
         if mask is None:
             mask = np.ones(n, dtype=bool)
-        self._count[np.broadcast_to(np.asarray(mask, bool), (n,))] = 0
+        mask = np.broadcast_to(np.asarray(mask, bool), (n,))
+        self._count[mask] = 0
+        if self.recurrent:
+            self._starts[mask] = True  # the policy zeroes their LSTM state at the decision
 
-    def predict(self, obs: np.ndarray) -> np.ndarray:
-        """Actions for raw observations (normalised with the frozen statistics)."""
+    def predict(self, obs: np.ndarray, due: np.ndarray | None = None) -> np.ndarray:
+        """Actions for raw observations (normalised with the frozen statistics).  A recurrent
+        policy advances the memory of the sub-environments in ``due`` (None: all) and keeps
+        the others' (they hold their last action and do not decide now)."""
         obs = np.asarray(obs, dtype=np.float32)
         if self.vecnormalize is not None:
             obs = self.vecnormalize.normalize_obs(obs)
-        act, _ = self.model.predict(obs, deterministic=self.deterministic)
+        if not self.recurrent:
+            act, _ = self.model.predict(obs, deterministic=self.deterministic)
+        else:
+            act, state = self.model.predict(obs, state=self._state,
+                                            episode_start=self._starts,
+                                            deterministic=self.deterministic)
+            due = slice(None) if due is None else due
+            for kept, new in zip(self._state, state):
+                kept[:, due] = new[:, due]
+            self._starts[due] = False
         return np.clip(np.asarray(act, dtype=np.float32), -1.0, 1.0)
 
     def act(self, obs: np.ndarray, info: dict | None = None) -> np.ndarray:
@@ -205,7 +233,7 @@ class PPOPolicy:
             return self.predict(obs)
         due = self._count % self._repeat == 0
         if due.any():
-            self._last[due] = self.predict(obs)[due]
+            self._last[due] = self.predict(obs, due)[due]
         self._count += 1
         return self._last.copy()
 
@@ -242,7 +270,7 @@ def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, 
     vn = (load_vecnormalize(files.norm_path, obs_size) if files.norm_path is not None
           else None)
     model = load_model(files.model_path, obs_size, files.manifest["action_size"],
-                       custom_objects_for(files.entry))
+                       custom_objects_for(files.entry), files.algo)
     return PPOPolicy(model, vn, config, name=name or f"ppo:{folder.name}",
                      deterministic=deterministic,
                      observation_names=files.observation_names)

@@ -94,6 +94,17 @@ class AgentFiles:
     def observation_names(self) -> list[str]:
         return list(self.manifest["observation"]["names"])
 
+    @property
+    def algo(self) -> str:
+        """The algorithm that trained the model (``ppo`` or ``ppo_lstm``), from its policy."""
+        return entry_algorithm(self.entry)
+
+
+def entry_algorithm(entry: Mapping[str, Any]) -> str:
+    """The algorithm (``ppo`` or ``ppo_lstm``) of a config entry, from its ``policy``."""
+    from .config import algorithm_of
+    return algorithm_of(str(entry.get("policy", "MlpPolicy")))
+
 
 def _label(path: Path) -> str:
     return f"agent file {str(path)!r}"
@@ -296,17 +307,18 @@ def load_vecnormalize(path: Path, obs_size: int) -> Any:
 
 
 def load_model(path: Path, obs_size: int, action_size: int | None = None,
-               custom_objects: dict | None = None) -> Any:
-    """The SB3 PPO model in ``path`` (on the CPU); one :class:`AgentError` if it cannot be
-    read or its spaces are not ``obs_size`` observations and ``action_size`` actions (None:
-    any)."""
-    from stable_baselines3 import PPO
+               custom_objects: dict | None = None, algo: str = "ppo") -> Any:
+    """The SB3 model in ``path`` (on the CPU), trained by ``algo`` (``ppo``, or ``ppo_lstm``:
+    RecurrentPPO); one :class:`AgentError` if it cannot be read or its spaces are not
+    ``obs_size`` observations and ``action_size`` actions (None: any)."""
+    from .config import ALGORITHMS, algorithm_class
 
+    algorithm = algorithm_class(algo)
     label = _label(path)
     try:
-        model = PPO.load(path, device="cpu", custom_objects=custom_objects)
+        model = algorithm.load(path, device="cpu", custom_objects=custom_objects)
     except Exception as exc:  # zip, pickle and torch errors: every one means a bad file
-        raise AgentError(f"{label} cannot be read as an SB3 PPO model "
+        raise AgentError(f"{label} cannot be read as an SB3 {ALGORITHMS[algo][1]} model "
                          f"({_one_line(exc)})") from None
     obs_shape = tuple(getattr(model.observation_space, "shape", None) or ())
     act_shape = tuple(getattr(model.action_space, "shape", None) or ())
@@ -321,9 +333,11 @@ def load_model(path: Path, obs_size: int, action_size: int | None = None,
 def custom_objects_for(entry: Mapping[str, Any]) -> dict | None:
     """SB3 ``custom_objects`` for a config entry: the network class by its current name
     (agents of the first wave pickled an older module path for it)."""
-    from .networks import BoundedMlpPolicy
-    if str(entry.get("policy", "")).endswith("BoundedMlpPolicy"):
-        return {"policy_class": BoundedMlpPolicy}
+    from . import networks
+    policy = str(entry.get("policy", ""))
+    for name in ("BoundedMlpPolicy", "BoundedMlpLstmPolicy"):
+        if policy.endswith(name):
+            return {"policy_class": getattr(networks, name)}
     return None
 
 
@@ -367,7 +381,8 @@ def write_manifest(folder: str | Path, observation_names: Sequence[str] | None =
             continue
         if not model_path.is_file():
             raise AgentError(f"{_label(model_path)} is missing or not a file")
-        model = load_model(model_path, len(names), action_size, custom)
+        model = load_model(model_path, len(names), action_size, custom,
+                           entry_algorithm(entry))
         action_size = int(model.action_space.shape[0])
         files[model_path.name] = file_fingerprint(model_path)
         if normalised:

@@ -31,6 +31,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       checkpoint_freq: 200000       # env steps between checkpoints (0: none)
       bootstrap_truncated: true     # report truncations to SB3 as TimeLimit.truncated
       tensorboard_log: tb           # TensorBoard event files (as --tensorboard-log DIR)
+      shaping: {observation: sync_amplitude, weight: 10.0}   # potential-based, training only
 
 The keys, declared once on :class:`TrainConfig`:
 
@@ -63,6 +64,10 @@ Why this layout (what rl_zoo3 does with a file: ``rl_zoo3/exp_manager.py``,
   (changing its log-probability), and an action ``env_wrapper`` bounds the applied action
   but not the Gaussian mean, whose run-away beyond the clip is what BoundedMlpPolicy
   prevents (see :mod:`abb_gym.rl.networks`).
+* A policy with memory (``MlpLstmPolicy``, or ``abb_gym.rl.networks.BoundedMlpLstmPolicy``
+  with the bounded mean) is trained by sb3-contrib's ``RecurrentPPO``, as rl_zoo3 does with
+  ``--algo ppo_lstm``: the algorithm follows from the policy (:func:`algorithm_of`), so the
+  file needs no key of its own, and the keys under the id are RecurrentPPO's keywords.
 * ``policy_kwargs`` is the zoo's string (``activation_fn=nn.Tanh``): the zoo evaluates a
   string with ``torch.nn`` in scope but passes a mapping on unchanged, where
   ``activation_fn: Tanh`` would reach torch as a string.
@@ -103,7 +108,8 @@ __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_F
            "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
-           "zoo_problems", "TrainConfigError"]
+           "zoo_problems", "TrainConfigError", "ALGORITHMS", "algorithm_of",
+           "algorithm_class"]
 
 #: preset fields that shape the observation (the environment must use the agent's values)
 OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
@@ -118,9 +124,11 @@ RESERVED_ENV_KWARGS = frozenset({"id", "num_envs", "vectorization_mode", "vector
 ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
-                "checkpoint_freq", "bootstrap_truncated", "tensorboard_log")
+                "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping")
+#: of those, the ones only the ``_abb_gym`` section may hold
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping")
 #: of those, the ones a first-wave file holds under the environment id (still read)
-LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k != "tensorboard_log")
+LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k not in SECTION_ONLY_KEYS)
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 #: keys rl_zoo3 consumes itself under the id (``ExperimentManager._preprocess_hyperparams``);
@@ -129,11 +137,39 @@ ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "env_kwargs", "policy", "polic
             "frame_stack", "monitor_kwargs", "env_wrapper", "vec_env_wrapper", "callback")
 #: PPO keywords rl_zoo3 sets from its command line: under the id PPO would get them twice
 ZOO_OWN_KEYWORDS = ("env", "tensorboard_log", "seed", "verbose", "device")
-#: SB3's names for its own PPO policies (``PPO.policy_aliases``)
-SB3_POLICY_ALIASES = ("MlpPolicy", "CnnPolicy", "MultiInputPolicy")
+#: SB3's and sb3-contrib's names for their own policies (``PPO.policy_aliases``,
+#: ``RecurrentPPO.policy_aliases``)
+SB3_POLICY_ALIASES = ("MlpPolicy", "CnnPolicy", "MultiInputPolicy", "MlpLstmPolicy",
+                      "CnnLstmPolicy", "MultiInputLstmPolicy")
 POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
                 "BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
-                "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy"}
+                "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
+                "MlpLstmPolicy": "MlpLstmPolicy",
+                "abb_gym.rl.networks.BoundedMlpLstmPolicy":
+                    "abb_gym.rl.networks.BoundedMlpLstmPolicy"}
+#: the algorithms, by rl_zoo3's ``--algo`` name: (module, class)
+ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "RecurrentPPO")}
+#: policies with memory (an LSTM), trained by RecurrentPPO; every other one by PPO
+RECURRENT_POLICIES = ("MlpLstmPolicy", "abb_gym.rl.networks.BoundedMlpLstmPolicy")
+
+
+def algorithm_of(policy: str) -> str:
+    """rl_zoo3's ``--algo`` name of the algorithm that trains ``policy``: ``ppo_lstm``
+    (sb3-contrib's RecurrentPPO) for a recurrent policy, else ``ppo``."""
+    return "ppo_lstm" if POLICY_NAMES.get(policy, policy) in RECURRENT_POLICIES else "ppo"
+
+
+def algorithm_class(algo: str) -> type:
+    """The SB3 (or sb3-contrib) class of ``algo`` (a key of :data:`ALGORITHMS`); an
+    ``ImportError`` naming the package if it is missing."""
+    import importlib
+    module, name = ALGORITHMS[algo]
+    try:
+        return getattr(importlib.import_module(module), name)
+    except ImportError as exc:
+        package = module.replace("_", "-")
+        raise ImportError(f"{name} ({algo}) needs {package}: pip install -c constraints.txt "
+                          f"'abb-gym[train]' ({exc})") from exc
 
 
 class TrainConfigError(ConfigError):
@@ -150,9 +186,8 @@ def config_path(name_or_path: str | os.PathLike) -> Path:
     return locate("ppo", name_or_path, "PPO config", TrainConfigError)
 
 
-def _ppo_keywords() -> set[str]:
-    from stable_baselines3 import PPO
-    params = set(inspect.signature(PPO.__init__).parameters)
+def _ppo_keywords(algo: str = "ppo") -> set[str]:
+    params = set(inspect.signature(algorithm_class(algo).__init__).parameters)
     return params - {"self", "policy", "env", "policy_kwargs", "seed", "device",
                      "_init_setup_model", "verbose"}
 
@@ -238,7 +273,10 @@ class TrainConfig:
                                doc="environment steps, all sub-environments together")
     policy: str = declare("MlpPolicy", kind="choice", choices=tuple(POLICY_NAMES),
                           doc="MlpPolicy or abb_gym.rl.networks.BoundedMlpPolicy "
-                              "(BoundedMlpPolicy: the first-wave name)")
+                              "(BoundedMlpPolicy: the first-wave name), trained by PPO; "
+                              "MlpLstmPolicy or abb_gym.rl.networks.BoundedMlpLstmPolicy "
+                              "(memory), trained by sb3-contrib's RecurrentPPO (rl_zoo3: "
+                              "--algo ppo_lstm)")
     normalize: dict[str, Any] | None = declare(kind="any",
                                                factory=lambda: {"norm_obs": True,
                                                                 "norm_reward": True},
@@ -266,6 +304,10 @@ class TrainConfig:
     tensorboard_log: str | None = declare(None, kind="text", nullable=True,
                                           doc="_abb_gym: folder of TensorBoard event files "
                                               "(null: none)")
+    shaping: dict[str, Any] | None = declare(None, kind="any",
+                                             doc="_abb_gym: potential-based reward shaping "
+                                                 "{observation, weight} of the training "
+                                                 "environment (abb_gym.rl.shaping; null: none)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
@@ -287,10 +329,13 @@ class TrainConfig:
                                    f"{extra!r})")
         raw = copy.deepcopy(dict(raw))
         extra = copy.deepcopy(dict(extra or {}))
-        if "tensorboard_log" in raw:
-            raise TrainConfigError(f"{where}: field 'tensorboard_log' belongs in the "
-                                   f"{ABB_GYM_SECTION} section, not under the environment id "
-                                   f"(rl_zoo3 passes its own tensorboard_log to PPO)")
+        for key in SECTION_ONLY_KEYS:
+            if key in raw:
+                why = ("rl_zoo3 passes its own tensorboard_log to PPO"
+                       if key == "tensorboard_log" else "rl_zoo3 would pass it to PPO")
+                raise TrainConfigError(f"{where}: field {key!r} belongs in the "
+                                       f"{ABB_GYM_SECTION} section, not under the environment "
+                                       f"id ({why})")
         stray = sorted(set(extra) - set(ABB_GYM_KEYS), key=str)
         if stray:
             raise TrainConfigError(f"{where}: unknown key(s) {stray} in {ABB_GYM_SECTION}; "
@@ -304,11 +349,13 @@ class TrainConfig:
         raw.update(extra)
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
-        ppo_keys = _ppo_keywords()
+        algo = algorithm_of(str(raw.get("policy", "MlpPolicy")))
+        ppo_keys = _ppo_keywords(algo)
         unknown = sorted(set(raw) - own - ppo_keys, key=str)
         if unknown:
             raise TrainConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
-                                   f"{sorted(own)} and the PPO keywords {sorted(ppo_keys)}")
+                                   f"{sorted(own)} and the {ALGORITHMS[algo][1]} keywords "
+                                   f"{sorted(ppo_keys)}")
         values: dict[str, Any] = {}
         for key in own & set(raw):
             v = raw.pop(key)
@@ -328,6 +375,9 @@ class TrainConfig:
                     raise TrainConfigError(f"{where}: field {key!r} must not set {reserved}: "
                                            f"the trainer sets them (n_envs is the number of "
                                            f"sub-environments)")
+            elif key == "shaping":
+                from .shaping import shaping_settings
+                v = shaping_settings(v, where, TrainConfigError)
             elif key == "tensorboard_log":
                 # SB3 would only fail when training starts, after the environments are built
                 if v is not None and (not isinstance(v, str) or not v):
@@ -342,6 +392,11 @@ class TrainConfig:
             if key in raw:
                 _schedule(key, raw[key])
         return cls(env_id=env_id, hyperparams=raw, source=str(source), **values)
+
+    @property
+    def algo(self) -> str:
+        """rl_zoo3's ``--algo`` name of the algorithm that trains this config's policy."""
+        return algorithm_of(self.policy)
 
     def with_overrides(self, **changes: Any) -> "TrainConfig":
         """A copy with keys of the entry (PPO hyperparameters included) or of ``_abb_gym``
@@ -375,6 +430,8 @@ class TrainConfig:
                "bootstrap_truncated": self.bootstrap_truncated}
         if self.tensorboard_log is not None:
             out["tensorboard_log"] = self.tensorboard_log
+        if self.shaping is not None:
+            out["shaping"] = copy.deepcopy(self.shaping)
         return out
 
     def to_file_data(self) -> dict[str, Any]:
@@ -420,7 +477,8 @@ def load_config(name_or_path: str | os.PathLike, env_id: str | None = None) -> T
 
 def zoo_problems(config: str | os.PathLike | Mapping[str, Any],
                  env_id: str | None = None) -> list[str]:
-    """What keeps rl_zoo3 (``python -m rl_zoo3.train --algo ppo -conf FILE``) from training a
+    """What keeps rl_zoo3 (``python -m rl_zoo3.train --algo ppo -conf FILE``, ``--algo
+    ppo_lstm`` for a recurrent policy) from training a
     config file unchanged: one line per problem, naming the id and the key; empty if none.
 
     ``config`` is a file (path or name on the search path) or its parsed content; ``env_id``
@@ -471,7 +529,7 @@ def _zoo_entry_problems(entry: Any) -> list[str]:
     elif policy not in SB3_POLICY_ALIASES:
         hint = (f"; rl_zoo3 imports a custom policy by its import path: "
                 f"{POLICY_NAMES[policy]}" if policy in POLICY_NAMES else "")
-        problems.append(f"'policy': {policy!r} is not an SB3 PPO policy name "
+        problems.append(f"'policy': {policy!r} is not an SB3 policy name "
                         f"{list(SB3_POLICY_ALIASES)}{hint}")
     kwargs = entry.get("policy_kwargs")
     if isinstance(kwargs, str):
@@ -504,7 +562,7 @@ def _zoo_entry_problems(entry: Any) -> list[str]:
     env_kwargs = entry.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
         problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
-    ppo_keys = _ppo_keywords()
+    ppo_keys = _ppo_keywords(algorithm_of(policy) if isinstance(policy, str) else "ppo")
     for key in entry:
         if key in LEGACY_ENTRY_KEYS or key == "tensorboard_log":
             why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"

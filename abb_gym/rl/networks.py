@@ -2,6 +2,9 @@
 
 ``BoundedMlpPolicy`` is SB3's ``MlpPolicy`` (``ActorCriticPolicy``) with the Gaussian mean
 passed through ``tanh``, so the mean stays inside the [-1, 1] action box.
+``BoundedMlpLstmPolicy`` is the same bound on sb3-contrib's ``MlpLstmPolicy``
+(``RecurrentActorCriticPolicy``, trained by ``RecurrentPPO``): a policy with memory, the
+alternative to the frame stack (:func:`recurrent_policy_class`; needs sb3-contrib).
 
 Why: the environments clip actions to [-1, 1], and SB3's PPO computes the log-probability of
 the *unclipped* sample.  With a plain linear mean, a phase where "always the largest action"
@@ -27,11 +30,12 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 import torch
 from torch import nn
 
-__all__ = ["BoundedMlpPolicy", "POLICIES"]
+__all__ = ["BoundedMlpPolicy", "BoundedMlpLstmPolicy", "POLICIES", "policy_class"]
 
 
-class BoundedMlpPolicy(ActorCriticPolicy):
-    """``MlpPolicy`` with a ``tanh``-bounded action mean (see the module docstring).
+class _BoundedMean:
+    """The ``tanh`` bound on the action mean and its initial value, for any SB3 actor-critic
+    policy whose ``_build`` creates ``action_net`` (see the module docstring).
 
     :param action_mean_init: initial action mean, a number or a sequence (one per action
         entry), each in (-1, 1); default 0.
@@ -66,4 +70,46 @@ class BoundedMlpPolicy(ActorCriticPolicy):
         return data
 
 
-POLICIES = {"MlpPolicy": "MlpPolicy", "abb_gym.rl.networks.BoundedMlpPolicy": BoundedMlpPolicy}
+class BoundedMlpPolicy(_BoundedMean, ActorCriticPolicy):
+    """``MlpPolicy`` with a ``tanh``-bounded action mean (see the module docstring)."""
+
+
+def _recurrent_class() -> type:
+    try:
+        from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
+    except ImportError as exc:
+        raise ImportError(f"the recurrent policies (RecurrentPPO) need sb3-contrib: pip install "
+                          f"-c constraints.txt 'abb-gym[train]' ({exc})") from exc
+
+    class BoundedMlpLstmPolicy(_BoundedMean, RecurrentActorCriticPolicy):
+        """sb3-contrib's ``MlpLstmPolicy`` with a ``tanh``-bounded action mean (see the
+        module docstring)."""
+
+    # importable by name, as pickles (SB3's model.zip) and rl_zoo3 refer to it
+    BoundedMlpLstmPolicy.__module__ = __name__
+    BoundedMlpLstmPolicy.__qualname__ = "BoundedMlpLstmPolicy"
+    return BoundedMlpLstmPolicy
+
+
+def __getattr__(name: str):
+    # sb3-contrib is imported only when the recurrent policy is asked for
+    if name == "BoundedMlpLstmPolicy":
+        cls = _recurrent_class()
+        globals()[name] = cls
+        return cls
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+#: import path of each policy class abb-gym builds (SB3's own names map to themselves)
+POLICIES = {"MlpPolicy": "MlpPolicy", "MlpLstmPolicy": "MlpLstmPolicy",
+            "abb_gym.rl.networks.BoundedMlpPolicy": "BoundedMlpPolicy",
+            "abb_gym.rl.networks.BoundedMlpLstmPolicy": "BoundedMlpLstmPolicy"}
+
+
+def policy_class(name: str):
+    """What to pass to the algorithm for the policy ``name`` (a key of :data:`POLICIES`): SB3's
+    alias string, or the class."""
+    target = POLICIES[name]
+    if name == target:
+        return target
+    return globals()[target] if target in globals() else __getattr__(target)

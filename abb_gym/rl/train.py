@@ -7,8 +7,10 @@ What one run does:
 
 1. builds the native vector environment of the config (``n_envs`` sub-environments, one
    compiled parallel step) behind the SB3 adapter :class:`~abb_gym.rl.vec_env.NativeVecEnv`,
-   with ``VecMonitor`` (episode statistics) and ``VecNormalize`` (if ``normalize``);
-2. trains ``PPO`` for ``n_timesteps`` environment steps with the seed (Python, NumPy, torch,
+   with ``VecMonitor`` (episode statistics), the potential-based reward shaping (if
+   ``shaping``: :mod:`abb_gym.rl.shaping`) and ``VecNormalize`` (if ``normalize``);
+2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy: :func:`~abb_gym.rl.config.algorithm_of`)
+   for ``n_timesteps`` environment steps with the seed (Python, NumPy, torch,
    the environments' generators and the action space), a progress bar, a test-set evaluation
    every ``eval_freq`` steps and checkpoints every ``checkpoint_freq`` steps;
 3. writes the run folder (default ``runs/<config>/s<seed>-<time>``, git-ignored):
@@ -60,7 +62,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .config import (TrainConfig, eval_env_kwargs,
+from .config import (TrainConfig, algorithm_class, eval_env_kwargs,
                      make_sb3_env, policy_env_fields)
 from .agent import PPOPolicy
 from ..evaluation.evaluate import summarise
@@ -325,7 +327,6 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         ``tensorboard`` package (training extra).  None: the config's, else no TensorBoard.
     """
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -346,7 +347,11 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
     venv = make_sb3_env(cfg.env_id, cfg.n_envs, cfg.env_kwargs,
                         bootstrap_truncated=cfg.bootstrap_truncated)
-    env = VecMonitor(venv)
+    env = VecMonitor(venv)  # logs the unshaped returns
+    if cfg.shaping is not None:
+        from .shaping import PotentialShaping, potential_index
+        index = potential_index(venv.unwrapped.setup.obs_names, cfg.shaping["observation"])
+        env = PotentialShaping(env, index, cfg.shaping["weight"], ppo_kw.get("gamma", 0.99))
     if cfg.normalize is not None:
         norm_kw = dict(cfg.normalize)
         norm_kw.setdefault("gamma", ppo_kw.get("gamma", 0.99))
@@ -361,8 +366,10 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         meta["tensorboard_log"] = _repo_relative(str(tb_dir))
     write_config(run_dir, cfg, meta)
 
-    from .networks import POLICIES
-    model = PPO(POLICIES[cfg.policy], env, seed=int(seed), device="cpu", verbose=verbose, **ppo_kw)
+    from .networks import policy_class
+    algorithm = algorithm_class(cfg.algo)
+    model = algorithm(policy_class(cfg.policy), env, seed=int(seed), device="cpu",
+                      verbose=verbose, **ppo_kw)
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
                                   cfg.eval_episodes, cfg.eval_seed, meta,
