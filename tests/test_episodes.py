@@ -2,6 +2,8 @@
 (:mod:`abb_gym.envs.episodes`); the vectorised write must equal packing each episode's Scene."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -107,3 +109,47 @@ def test_reset_options_are_checked_by_name():
         episodes.draw(setup, rng, {"critical_speed_scale": -1.0})
     with pytest.raises(ValueError, match="'support_damping_scale' must be a number"):
         episodes.draw(setup, rng, {"support_damping_scale": "high"})
+
+
+@pytest.mark.parametrize("scene, preset", [("yoshida_odd", "train"), ("yoshida_odd", "test"),
+                                           ("yoshida_odd", "varied"),
+                                           ("spannan_cfrp", "varied_test"),
+                                           ("yoshida_odd5", "nominal"),
+                                           ("lu_hung_odd3", "train")])
+def test_rows_drawn_at_once_are_each_rows_draw_bit_for_bit(scene, preset):
+    """The autoreset draws all resetting rows at once (draw_rows); every value must be the one
+    draw() gives row by row from the same generator, bit for bit, and the generators must end
+    in the same state: seeded episodes do not change."""
+    setup = EnvSetup("speed", scene, preset)
+    seeds = [3, 14, 15, 92, 65]
+    one = [np.random.default_rng(s) for s in seeds]
+    many = [np.random.default_rng(s) for s in seeds]
+    for _ in range(3):  # later draws too: the generators advance alike
+        want = [episodes.draw(setup, rng, None) for rng in one]
+        got = episodes.draw_rows(setup, many, [None, {}, None, {}, None])
+        for k, column in enumerate(zip(*want)):
+            assert got[k].dtype == np.array(column).dtype, k
+            assert np.array_equal(got[k], np.array(column)), (k, got[k], column)
+            assert np.array_equal(np.signbit(got[k]), np.signbit(np.array(column))), k
+    assert [r.bit_generator.state for r in one] == [r.bit_generator.state for r in many]
+
+
+def test_rows_with_reset_options_are_drawn_row_by_row():
+    setup = EnvSetup("speed", "yoshida_odd", "varied")
+    opts = [None, {"imbalance_ratio": 0.5, "critical_speed_scale": 1.1}]
+    got = episodes.draw_rows(setup, [np.random.default_rng(1), np.random.default_rng(2)], opts)
+    want = [episodes.draw(setup, np.random.default_rng(s), o) for s, o in zip((1, 2), opts)]
+    for k, column in enumerate(zip(*want)):
+        assert np.array_equal(got[k], np.array(column)), k
+    assert got[5][1] == 1.1
+    with pytest.raises(ValueError, match="options must be a dict"):
+        episodes.draw_rows(setup, [np.random.default_rng(1)], [[]])
+
+
+def test_angles_reduce_exactly_whether_in_range_or_not():
+    a = np.array([0.0, -0.0, np.pi, -np.pi, 3.5, -7.0, 1e6, np.nan, 2 * np.pi])
+    got = episodes.reduce_angle(a)
+    want = [math.remainder(v, episodes.TWO_PI) for v in a]
+    assert np.array_equal(got, want, equal_nan=True)
+    assert np.array_equal(np.signbit(got), np.signbit(want))
+    assert got.shape == a.shape and episodes.reduce_angle(a.reshape(3, 3)).shape == (3, 3)

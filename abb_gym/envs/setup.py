@@ -376,10 +376,8 @@ class EnvSetup:
         """Draw the episodes of ``rows`` (row ``rows[k]`` from generator ``rngs[k]`` with reset
         options ``options[k]``) and compute their start, changing nothing but the generators'
         states (which a caller rolls back on error): :func:`episodes.commit` writes it."""
-        values = [episodes.draw(self, rng, None if options is None else options[k])
-                  for k, rng in enumerate(rngs)]
-        imbalance, phase, angles, drag, roll, crit, damp, key = (np.array(v)
-                                                                  for v in zip(*values))
+        imbalance, phase, angles, drag, roll, crit, damp, key = episodes.draw_rows(
+            self, rngs, options)
         return episodes.prepare(self, table, rows, imbalance, phase, angles, drag, roll, crit,
                                 damp, key)
 
