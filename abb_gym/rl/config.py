@@ -32,6 +32,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       bootstrap_truncated: true     # report truncations to SB3 as TimeLimit.truncated
       tensorboard_log: tb           # TensorBoard event files (as --tensorboard-log DIR)
       shaping: {observation: sync_amplitude, weight: 10.0}   # potential-based, training only
+      curriculum: {fields: [critical_speed_scale], start: 0.2, full_at: 0.5}  # narrow first
 
 The keys, declared once on :class:`TrainConfig`:
 
@@ -124,9 +125,10 @@ RESERVED_ENV_KWARGS = frozenset({"id", "num_envs", "vectorization_mode", "vector
 ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
-                "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping")
+                "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping",
+                "curriculum")
 #: of those, the ones only the ``_abb_gym`` section may hold
-SECTION_ONLY_KEYS = ("tensorboard_log", "shaping")
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum")
 #: of those, the ones a first-wave file holds under the environment id (still read)
 LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k not in SECTION_ONLY_KEYS)
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
@@ -308,6 +310,11 @@ class TrainConfig:
                                              doc="_abb_gym: potential-based reward shaping "
                                                  "{observation, weight} of the training "
                                                  "environment (abb_gym.rl.shaping; null: none)")
+    curriculum: dict[str, Any] | None = declare(None, kind="any",
+                                                doc="_abb_gym: training ranges widened from "
+                                                    "similar machines to the preset's "
+                                                    "{fields, start, full_at} "
+                                                    "(abb_gym.rl.curriculum; null: none)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
@@ -375,6 +382,9 @@ class TrainConfig:
                     raise TrainConfigError(f"{where}: field {key!r} must not set {reserved}: "
                                            f"the trainer sets them (n_envs is the number of "
                                            f"sub-environments)")
+            elif key == "curriculum":
+                from .curriculum import curriculum_settings
+                v = curriculum_settings(v, where, TrainConfigError)
             elif key == "shaping":
                 from .shaping import shaping_settings
                 v = shaping_settings(v, where, TrainConfigError)
@@ -432,6 +442,8 @@ class TrainConfig:
             out["tensorboard_log"] = self.tensorboard_log
         if self.shaping is not None:
             out["shaping"] = copy.deepcopy(self.shaping)
+        if self.curriculum is not None:
+            out["curriculum"] = copy.deepcopy(self.curriculum)
         return out
 
     def to_file_data(self) -> dict[str, Any]:

@@ -8,7 +8,9 @@ What one run does:
 1. builds the native vector environment of the config (``n_envs`` sub-environments, one
    compiled parallel step) behind the SB3 adapter :class:`~abb_gym.rl.vec_env.NativeVecEnv`,
    with ``VecMonitor`` (episode statistics), the potential-based reward shaping (if
-   ``shaping``: :mod:`abb_gym.rl.shaping`) and ``VecNormalize`` (if ``normalize``);
+   ``shaping``: :mod:`abb_gym.rl.shaping`) and ``VecNormalize`` (if ``normalize``), and
+   narrows the machines' ranges early in training (if ``curriculum``:
+   :mod:`abb_gym.rl.curriculum`);
 2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy: :func:`~abb_gym.rl.config.algorithm_of`)
    for ``n_timesteps`` environment steps with the seed (Python, NumPy, torch,
    the environments' generators and the action space), a progress bar, a test-set evaluation
@@ -375,6 +377,9 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
                                   cfg.eval_episodes, cfg.eval_seed, meta,
                                   verbose=max(verbose, int(progress is False)))
     callbacks.append(eval_cb)
+    if cfg.curriculum is not None:
+        from .curriculum import CurriculumCallback
+        callbacks.append(CurriculumCallback(cfg.curriculum, cfg.n_timesteps))
     if cfg.checkpoint_freq > 0:
         callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                             str(run_dir / "checkpoints"), name_prefix="ppo",
