@@ -153,14 +153,16 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
     pytest.importorskip("rl_zoo3", reason="rl_zoo3 is not installed (pip install -c "
                                           "constraints.txt rl_zoo3): the zoo cannot be run")
     from torch import nn
-    from abb_gym.rl.config import algorithm_class
+    from abb_gym.rl.config import OFF_POLICY, algorithm_class
     from abb_gym.rl.networks import policy_class
 
     cfg = load_config(path, env_id)
     algorithm = algorithm_class(cfg.algo)
     kw = cfg.ppo_kwargs()
-    rollout = kw["n_steps"] * cfg.n_envs
-    # the zoo always completes a rollout: -n of one rollout = one rollout and one PPO update
+    off_policy = cfg.algo in OFF_POLICY
+    # the zoo always completes a rollout: -n of one rollout = one rollout and one PPO update;
+    # off-policy: four vector steps (no update before learning_starts)
+    rollout = cfg.n_envs * 4 if off_policy else kw["n_steps"] * cfg.n_envs
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", cfg.algo, "--env", env_id,
            "--gym-packages", "abb_gym", "-conf", str(path), "-n", str(rollout),
            "-f", str(tmp_path / "logs"), "--seed", "0"]
@@ -178,10 +180,15 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
     # the hyperparameters abb-gym train reads from the same file
     assert model.num_timesteps == rollout
     assert model.n_envs == cfg.n_envs
-    for key in ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "ent_coef"):
+    keys = (("batch_size", "gamma", "tau", "learning_starts", "buffer_size", "gradient_steps")
+            if off_policy else ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda",
+                                "ent_coef"))
+    for key in keys:
         assert getattr(model, key) == kw[key], key
-    for key, schedule in (("learning_rate", model.lr_schedule), ("clip_range",
-                                                                 model.clip_range)):
+    schedules = [("learning_rate", model.lr_schedule)]
+    if not off_policy:
+        schedules.append(("clip_range", model.clip_range))
+    for key, schedule in schedules:
         expect = kw[key] if callable(kw[key]) else (lambda p, v=kw[key]: v)
         for p in (1.0, 0.5, 0.1):
             assert schedule(p) == pytest.approx(expect(p)), key
@@ -192,7 +199,8 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
         expected_class = algorithm.policy_aliases[expected_class]
     assert type(model.policy) is expected_class
     assert model.policy.net_arch == pk["net_arch"]
-    assert model.policy.activation_fn is pk["activation_fn"]
+    if "activation_fn" in pk:
+        assert model.policy.activation_fn is pk["activation_fn"]
     if "action_mean_init" in pk:
         assert model.policy.action_mean_init == pk["action_mean_init"]
         assert isinstance(model.policy.action_net[-1], nn.Tanh)  # the tanh-bounded mean

@@ -96,14 +96,18 @@ class AgentFiles:
 
     @property
     def algo(self) -> str:
-        """The algorithm that trained the model (``ppo`` or ``ppo_lstm``), from its policy."""
-        return entry_algorithm(self.entry)
+        """The algorithm that trained the model (rl_zoo3's ``--algo`` name)."""
+        return entry_algorithm(self.entry, self.config)
 
 
-def entry_algorithm(entry: Mapping[str, Any]) -> str:
-    """The algorithm (``ppo`` or ``ppo_lstm``) of a config entry, from its ``policy``."""
-    from .config import algorithm_of
-    return algorithm_of(str(entry.get("policy", "MlpPolicy")))
+def entry_algorithm(entry: Mapping[str, Any], data: Mapping[str, Any] | None = None) -> str:
+    """The algorithm of a config entry: ``_abb_gym.algo`` of the whole file ``data`` if set,
+    else the one its ``policy`` implies (``ppo``, ``ppo_lstm``)."""
+    from .config import ABB_GYM_SECTION, ALGORITHMS, algorithm_of
+    section = (data or {}).get(ABB_GYM_SECTION)
+    algo = section.get("algo") if isinstance(section, Mapping) else None
+    return algorithm_of(str(entry.get("policy", "MlpPolicy")),
+                        algo if algo in ALGORITHMS else None)
 
 
 def _label(path: Path) -> str:
@@ -363,7 +367,7 @@ def write_manifest(folder: str | Path, observation_names: Sequence[str] | None =
     from .config import load_config
 
     folder = Path(folder)
-    _, run, entry = _read_config(folder)
+    data, run, entry = _read_config(folder)
     env_id, penv = run["env_id"], run["policy_env"]
     try:
         normalised = load_config(folder / "config.yml", env_id).normalize is not None
@@ -382,7 +386,7 @@ def write_manifest(folder: str | Path, observation_names: Sequence[str] | None =
         if not model_path.is_file():
             raise AgentError(f"{_label(model_path)} is missing or not a file")
         model = load_model(model_path, len(names), action_size, custom,
-                           entry_algorithm(entry))
+                           entry_algorithm(entry, data))
         action_size = int(model.action_space.shape[0])
         files[model_path.name] = file_fingerprint(model_path)
         if normalised:

@@ -33,6 +33,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       tensorboard_log: tb           # TensorBoard event files (as --tensorboard-log DIR)
       shaping: {observation: sync_amplitude, weight: 10.0}   # potential-based, training only
       curriculum: {fields: [critical_speed_scale], start: 0.2, full_at: 0.5}  # narrow first
+      algo: sac                     # sac or tqc (policy MlpPolicy); default from the policy
 
 The keys, declared once on :class:`TrainConfig`:
 
@@ -69,6 +70,9 @@ Why this layout (what rl_zoo3 does with a file: ``rl_zoo3/exp_manager.py``,
   with the bounded mean) is trained by sb3-contrib's ``RecurrentPPO``, as rl_zoo3 does with
   ``--algo ppo_lstm``: the algorithm follows from the policy (:func:`algorithm_of`), so the
   file needs no key of its own, and the keys under the id are RecurrentPPO's keywords.
+* SAC and sb3-contrib's TQC (off-policy, their own squashed-Gaussian ``MlpPolicy``) are
+  chosen by ``algo: sac`` or ``algo: tqc`` in ``_abb_gym`` (rl_zoo3 takes ``--algo`` on its
+  command line); the keys under the id are then that algorithm's keywords.
 * ``policy_kwargs`` is the zoo's string (``activation_fn=nn.Tanh``): the zoo evaluates a
   string with ``torch.nn`` in scope but passes a mapping on unchanged, where
   ``activation_fn: Tanh`` would reach torch as a string.
@@ -126,9 +130,9 @@ ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
                 "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping",
-                "curriculum")
+                "curriculum", "algo")
 #: of those, the ones only the ``_abb_gym`` section may hold
-SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum")
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo")
 #: of those, the ones a first-wave file holds under the environment id (still read)
 LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k not in SECTION_ONLY_KEYS)
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
@@ -150,15 +154,40 @@ POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
                 "abb_gym.rl.networks.BoundedMlpLstmPolicy":
                     "abb_gym.rl.networks.BoundedMlpLstmPolicy"}
 #: the algorithms, by rl_zoo3's ``--algo`` name: (module, class)
-ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "RecurrentPPO")}
+ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "RecurrentPPO"),
+              "sac": ("stable_baselines3", "SAC"), "tqc": ("sb3_contrib", "TQC")}
+#: off-policy algorithms: their own squashed-Gaussian ``MlpPolicy``, chosen by ``_abb_gym.algo``
+OFF_POLICY = ("sac", "tqc")
 #: policies with memory (an LSTM), trained by RecurrentPPO; every other one by PPO
 RECURRENT_POLICIES = ("MlpLstmPolicy", "abb_gym.rl.networks.BoundedMlpLstmPolicy")
 
 
-def algorithm_of(policy: str) -> str:
-    """rl_zoo3's ``--algo`` name of the algorithm that trains ``policy``: ``ppo_lstm``
-    (sb3-contrib's RecurrentPPO) for a recurrent policy, else ``ppo``."""
+def algorithm_of(policy: str, algo: str | None = None) -> str:
+    """rl_zoo3's ``--algo`` name of the algorithm that trains ``policy``: ``algo`` if given
+    (the ``_abb_gym.algo`` key: ``sac`` or ``tqc``), else ``ppo_lstm`` (sb3-contrib's
+    RecurrentPPO) for a recurrent policy and ``ppo`` for any other."""
+    if algo is not None:
+        return algo
     return "ppo_lstm" if POLICY_NAMES.get(policy, policy) in RECURRENT_POLICIES else "ppo"
+
+
+def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
+    """The algorithm of a config entry's ``policy`` and ``_abb_gym.algo`` (None: from the
+    policy), or a TrainConfigError naming the field."""
+    if algo is not None and (not isinstance(algo, str) or algo not in ALGORITHMS):
+        raise TrainConfigError(f"{where}: field 'algo' must be one of {list(ALGORITHMS)} (got "
+                               f"{algo!r})")
+    policy = str(policy)
+    implied = algorithm_of(policy)
+    if algo in OFF_POLICY:
+        if POLICY_NAMES.get(policy) != "MlpPolicy":
+            raise TrainConfigError(f"{where}: field 'policy' must be MlpPolicy for algo {algo!r} "
+                                   f"(its own squashed-Gaussian policy; got {policy!r})")
+        return algo
+    if algo is not None and algo != implied:
+        raise TrainConfigError(f"{where}: field 'algo' is {algo!r}, but policy {policy!r} is "
+                               f"trained by {implied!r} (a recurrent policy by ppo_lstm)")
+    return implied
 
 
 def algorithm_class(algo: str) -> type:
@@ -278,7 +307,7 @@ class TrainConfig:
                               "(BoundedMlpPolicy: the first-wave name), trained by PPO; "
                               "MlpLstmPolicy or abb_gym.rl.networks.BoundedMlpLstmPolicy "
                               "(memory), trained by sb3-contrib's RecurrentPPO (rl_zoo3: "
-                              "--algo ppo_lstm)")
+                              "--algo ppo_lstm); MlpPolicy with algo sac or tqc")
     normalize: dict[str, Any] | None = declare(kind="any",
                                                factory=lambda: {"norm_obs": True,
                                                                 "norm_reward": True},
@@ -315,6 +344,9 @@ class TrainConfig:
                                                     "similar machines to the preset's "
                                                     "{fields, start, full_at} "
                                                     "(abb_gym.rl.curriculum; null: none)")
+    algo: str = declare("ppo", kind="choice", choices=tuple(ALGORITHMS),
+                        doc="_abb_gym: the algorithm, rl_zoo3's --algo name (default: ppo, "
+                            "ppo_lstm for a recurrent policy; sac or tqc only by this key)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
@@ -356,7 +388,7 @@ class TrainConfig:
         raw.update(extra)
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
-        algo = algorithm_of(str(raw.get("policy", "MlpPolicy")))
+        algo = _check_algorithm(where, raw.get("policy", "MlpPolicy"), raw.pop("algo", None))
         ppo_keys = _ppo_keywords(algo)
         unknown = sorted(set(raw) - own - ppo_keys, key=str)
         if unknown:
@@ -398,15 +430,11 @@ class TrainConfig:
             values[key] = v
         if "policy" in values:
             values["policy"] = POLICY_NAMES[values["policy"]]
+        values["algo"] = algo
         for key in SCHEDULE_KEYS:
             if key in raw:
                 _schedule(key, raw[key])
         return cls(env_id=env_id, hyperparams=raw, source=str(source), **values)
-
-    @property
-    def algo(self) -> str:
-        """rl_zoo3's ``--algo`` name of the algorithm that trains this config's policy."""
-        return algorithm_of(self.policy)
 
     def with_overrides(self, **changes: Any) -> "TrainConfig":
         """A copy with keys of the entry (PPO hyperparameters included) or of ``_abb_gym``
@@ -444,6 +472,8 @@ class TrainConfig:
             out["shaping"] = copy.deepcopy(self.shaping)
         if self.curriculum is not None:
             out["curriculum"] = copy.deepcopy(self.curriculum)
+        if self.algo != algorithm_of(self.policy):
+            out["algo"] = self.algo
         return out
 
     def to_file_data(self) -> dict[str, Any]:
@@ -510,13 +540,15 @@ def zoo_problems(config: str | os.PathLike | Mapping[str, Any],
     if not ids:
         return ["the file has no environment id entry (rl_zoo3 reads only the entry of "
                 "--env)"]
+    section = data.get(ABB_GYM_SECTION)
+    algo = section.get("algo") if isinstance(section, Mapping) else None
     out: list[str] = []
     for key in ids:
-        out += [f"{key}: {p}" for p in _zoo_entry_problems(data[key])]
+        out += [f"{key}: {p}" for p in _zoo_entry_problems(data[key], algo)]
     return out
 
 
-def _zoo_entry_problems(entry: Any) -> list[str]:
+def _zoo_entry_problems(entry: Any, algo: str | None = None) -> list[str]:
     if not isinstance(entry, Mapping):
         return [f"the entry must be a mapping of hyperparameters (got {entry!r})"]
     problems = []
@@ -574,7 +606,9 @@ def _zoo_entry_problems(entry: Any) -> list[str]:
     env_kwargs = entry.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
         problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
-    ppo_keys = _ppo_keywords(algorithm_of(policy) if isinstance(policy, str) else "ppo")
+    if algo not in ALGORITHMS:
+        algo = None
+    ppo_keys = _ppo_keywords(algorithm_of(policy, algo) if isinstance(policy, str) else "ppo")
     for key in entry:
         if key in LEGACY_ENTRY_KEYS or key == "tensorboard_log":
             why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"

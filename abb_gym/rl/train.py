@@ -11,8 +11,9 @@ What one run does:
    ``shaping``: :mod:`abb_gym.rl.shaping`) and ``VecNormalize`` (if ``normalize``), and
    narrows the machines' ranges early in training (if ``curriculum``:
    :mod:`abb_gym.rl.curriculum`);
-2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy: :func:`~abb_gym.rl.config.algorithm_of`)
-   for ``n_timesteps`` environment steps with the seed (Python, NumPy, torch,
+2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy, SAC or TQC if the config's
+   ``algo`` says so: :func:`~abb_gym.rl.config.algorithm_of`) for ``n_timesteps``
+   environment steps with the seed (Python, NumPy, torch,
    the environments' generators and the action space), a progress bar, a test-set evaluation
    every ``eval_freq`` steps and checkpoints every ``checkpoint_freq`` steps;
 3. writes the run folder (default ``runs/<config>/s<seed>-<time>``, git-ignored):
