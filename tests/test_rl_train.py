@@ -249,3 +249,13 @@ def test_config_keys_of_mixed_types_and_reserved_env_keywords_are_one_error(tmp_
         bad.write_text(yaml.safe_dump({SPEED: {"n_envs": 2, "env_kwargs": {key: 3}}}))
         with pytest.raises(TrainConfigError, match=key):
             load_config(bad)
+
+
+def test_the_training_share_benchmark_times_the_environment_and_puts_it_back():
+    from abb_gym.benchmarks.training_share import training_share
+    from abb_gym.rl.vec_env import NativeVecEnv
+    before = (NativeVecEnv.step_wait, NativeVecEnv.reset)
+    r = training_share("runup_speed_yoshida_odd_varied", steps=1024)
+    assert r["env_steps"] >= 1024
+    assert 0.0 < r["env_s"] < r["learn_s"] and 0.0 < r["env_share"] < 1.0
+    assert (NativeVecEnv.step_wait, NativeVecEnv.reset) == before
