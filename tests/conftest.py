@@ -54,3 +54,20 @@ def strict_check_env():
             check_env(env.unwrapped)
         env.close()
     return check
+
+
+def train_from_mapping(data: dict, root, seed: int = 0, name: str = "run") -> int:
+    """Write the config ``data`` (a zoo-style mapping) to ``root/<name>.yml`` and train it
+    through ``abb-gym train`` into ``root/<name>``; returns the command's exit code."""
+    import yaml
+    from abb_gym.cli import main as cli_main
+    path = root / f"{name}.yml"
+    path.write_text(yaml.safe_dump(data))
+    return cli_main(["train", "--config", str(path), "--seed", str(seed),
+                     "--out", str(root / name), "--no-progress"])
+
+
+@pytest.fixture(scope="session")
+def train_config():
+    """:func:`train_from_mapping`, for tests (and module-scoped fixtures) that train."""
+    return train_from_mapping

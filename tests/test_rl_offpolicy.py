@@ -11,7 +11,6 @@ import yaml
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
-from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.rl import load_config, load_policy  # noqa: E402
 from abb_gym.rl.config import TrainConfig, TrainConfigError, zoo_problems  # noqa: E402
 
@@ -24,16 +23,14 @@ ENTRY = {"n_envs": 2, "n_timesteps": 300, "policy": "MlpPolicy",
 
 
 @pytest.mark.parametrize("algo, cls", [("sac", "SAC"), ("tqc", "TQC")])
-def test_an_off_policy_agent_trains_loads_and_is_evaluated(algo, cls, tmp_path):
+def test_an_off_policy_agent_trains_loads_and_is_evaluated(algo, cls, tmp_path, train_config):
     from abb_gym.evaluation.evaluate import evaluate
     data = {SPEED: dict(ENTRY), "_abb_gym": {"algo": algo, "eval_freq": 0, "eval_episodes": 2,
                                             "eval_env_kwargs": {"preset": "varied_test"}}}
-    path = tmp_path / f"{algo}.yml"
-    path.write_text(yaml.safe_dump(data))
-    assert zoo_problems(path) == []
-    assert load_config(path).algo == algo
+    assert zoo_problems(data) == []
+    assert train_config(data, tmp_path) == 0
     run = tmp_path / "run"
-    assert cli_main(["train", "--config", str(path), "--out", str(run), "--no-progress"]) == 0
+    assert load_config(tmp_path / "run.yml").algo == algo
     stored = yaml.safe_load((run / "config.yml").read_text())
     assert stored["_abb_gym"]["algo"] == algo
     pol = load_policy(run)

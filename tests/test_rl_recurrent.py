@@ -12,7 +12,6 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 pytest.importorskip("torch")
 
-from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.rl import load_config, load_policy, make_native_env  # noqa: E402
 from abb_gym.rl.config import (TrainConfig, TrainConfigError, algorithm_of,  # noqa: E402
                                zoo_problems)
@@ -31,14 +30,10 @@ SMOKE = {SPEED: {
 
 
 @pytest.fixture(scope="module")
-def lstm_run(tmp_path_factory):
+def lstm_run(tmp_path_factory, train_config):
     root = tmp_path_factory.mktemp("lstm")
-    cfg = root / "lstm.yml"
-    cfg.write_text(yaml.safe_dump(SMOKE))
-    run = root / "run"
-    assert cli_main(["train", "--config", str(cfg), "--seed", "2", "--out", str(run),
-                     "--no-progress"]) == 0
-    return run
+    assert train_config(SMOKE, root, seed=2) == 0
+    return root / "run"
 
 
 def test_the_policy_chooses_the_algorithm():

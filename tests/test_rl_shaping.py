@@ -10,7 +10,6 @@ import yaml
 
 pytest.importorskip("stable_baselines3")
 
-from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.rl.config import TrainConfig, TrainConfigError, make_sb3_env  # noqa: E402
 from abb_gym.rl.shaping import PotentialShaping, potential_index  # noqa: E402
 
@@ -103,21 +102,16 @@ def test_an_unknown_observation_names_the_choices():
     assert potential_index(["sync_amplitude@t-1", "sync_amplitude"], "sync_amplitude") == 1
 
 
-def test_a_shaped_training_run_records_its_shaping(tmp_path):
+def test_a_shaped_training_run_records_its_shaping(tmp_path, train_config):
     entry, _ = _cfg()
     entry.update(n_steps=64, batch_size=64, n_epochs=1)
     data = {SPEED: entry, "_abb_gym": {"eval_freq": 0, "eval_episodes": 2,
                                        "eval_env_kwargs": {"preset": "varied_test"},
                                        "shaping": {"observation": "sync_amplitude",
                                                    "weight": 5.0}}}
-    path = tmp_path / "shaped.yml"
-    path.write_text(yaml.safe_dump(data))
-    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run"),
-                     "--no-progress"]) == 0
+    assert train_config(data, tmp_path) == 0
     stored = yaml.safe_load((tmp_path / "run" / "config.yml").read_text())
     assert stored["_abb_gym"]["shaping"] == {"observation": "sync_amplitude", "weight": 5.0}
     # an observation the environment does not have is refused before training
     data["_abb_gym"]["shaping"]["observation"] = "ball_angle"
-    path.write_text(yaml.safe_dump(data))
-    assert cli_main(["train", "--config", str(path), "--out", str(tmp_path / "run2"),
-                     "--no-progress"]) == 2
+    assert train_config(data, tmp_path, name="run2") == 2

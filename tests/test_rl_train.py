@@ -41,15 +41,10 @@ SMOKE = {SPEED: {
 
 
 @pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory):
+def smoke_run(tmp_path_factory, train_config):
     root = tmp_path_factory.mktemp("ppo")
-    cfg = root / "smoke.yml"
-    cfg.write_text(yaml.safe_dump(SMOKE))
-    run = root / "run"
-    code = cli_main(["train", "--config", str(cfg), "--seed", "3", "--out", str(run),
-                     "--no-progress"])
-    assert code == 0
-    return run
+    assert train_config(SMOKE, root, seed=3) == 0
+    return root / "run"
 
 
 def test_every_shipped_config_loads():
