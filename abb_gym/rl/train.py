@@ -175,9 +175,12 @@ def _make_eval_callback_class():
                 if vn is not None:
                     vn.save(str(self.run_dir / "best_vecnormalize.pkl"))
             if self.verbose:
+                # the residual is measured in the operating band only: none reached it, none
+                residual = (f"{means['residual_vibration']:.3f} W_r/e"
+                            if math.isfinite(means["residual_vibration"])
+                            else "n/a (no episode settled)")
                 print(f"eval @ {self.num_timesteps}: return {means['return']:.3f}, at speed "
-                      f"{means['at_speed']:.2f}, residual vibration "
-                      f"{means['residual_vibration']:.3f} W_r/e, run-up time "
+                      f"{means['at_speed']:.2f}, residual vibration {residual}, run-up time "
                       f"{means['run_up_time']:.2f} s, peak {means['peak_whirl']:.1f}, "
                       f"balanced {means['balanced']:.2f}", flush=True)
 
