@@ -11,6 +11,8 @@
 """
 from __future__ import annotations
 
+import math
+
 import os
 import pickle
 import subprocess
@@ -203,7 +205,11 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
         assert model.policy.activation_fn is pk["activation_fn"]
     if "action_mean_init" in pk:
         assert model.policy.action_mean_init == pk["action_mean_init"]
-        assert isinstance(model.policy.action_net[-1], nn.Tanh)  # the tanh-bounded mean
+        if off_policy:  # the actor's mean layer starts at atanh(action_mean_init)
+            assert model.actor.mu.bias.detach().numpy() == pytest.approx(
+                math.atanh(pk["action_mean_init"]), abs=0.05)
+        else:
+            assert isinstance(model.policy.action_net[-1], nn.Tanh)  # the tanh-bounded mean
     # the normalisation and the environment keywords of the file
     with open(run / name / "vecnormalize.pkl", "rb") as fh:
         vn = pickle.load(fh)

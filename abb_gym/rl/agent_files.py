@@ -339,7 +339,8 @@ def custom_objects_for(entry: Mapping[str, Any]) -> dict | None:
     (agents of the first wave pickled an older module path for it)."""
     from . import networks
     policy = str(entry.get("policy", ""))
-    for name in ("BoundedMlpPolicy", "BoundedMlpLstmPolicy"):
+    for name in ("BoundedMlpPolicy", "BoundedMlpLstmPolicy", "StartedSACPolicy",
+                 "StartedTQCPolicy"):
         if policy.endswith(name):
             return {"policy_class": getattr(networks, name)}
     return None

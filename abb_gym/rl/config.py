@@ -152,7 +152,9 @@ POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
                 "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
                 "MlpLstmPolicy": "MlpLstmPolicy",
                 "abb_gym.rl.networks.BoundedMlpLstmPolicy":
-                    "abb_gym.rl.networks.BoundedMlpLstmPolicy"}
+                    "abb_gym.rl.networks.BoundedMlpLstmPolicy",
+                "abb_gym.rl.networks.StartedSACPolicy": "abb_gym.rl.networks.StartedSACPolicy",
+                "abb_gym.rl.networks.StartedTQCPolicy": "abb_gym.rl.networks.StartedTQCPolicy"}
 #: the algorithms, by rl_zoo3's ``--algo`` name: (module, class)
 ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "RecurrentPPO"),
               "sac": ("stable_baselines3", "SAC"), "tqc": ("sb3_contrib", "TQC")}
@@ -160,6 +162,9 @@ ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "
 OFF_POLICY = ("sac", "tqc")
 #: policies with memory (an LSTM), trained by RecurrentPPO; every other one by PPO
 RECURRENT_POLICIES = ("MlpLstmPolicy", "abb_gym.rl.networks.BoundedMlpLstmPolicy")
+#: the off-policy algorithms' policies with an initial action mean, and their algorithm
+STARTED_POLICIES = {"abb_gym.rl.networks.StartedSACPolicy": "sac",
+                    "abb_gym.rl.networks.StartedTQCPolicy": "tqc"}
 
 
 def algorithm_of(policy: str, algo: str | None = None) -> str:
@@ -168,7 +173,10 @@ def algorithm_of(policy: str, algo: str | None = None) -> str:
     RecurrentPPO) for a recurrent policy and ``ppo`` for any other."""
     if algo is not None:
         return algo
-    return "ppo_lstm" if POLICY_NAMES.get(policy, policy) in RECURRENT_POLICIES else "ppo"
+    name = POLICY_NAMES.get(policy, policy)
+    if name in STARTED_POLICIES:
+        return STARTED_POLICIES[name]
+    return "ppo_lstm" if name in RECURRENT_POLICIES else "ppo"
 
 
 def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
@@ -180,9 +188,11 @@ def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
     policy = str(policy)
     implied = algorithm_of(policy)
     if algo in OFF_POLICY:
-        if POLICY_NAMES.get(policy) != "MlpPolicy":
-            raise TrainConfigError(f"{where}: field 'policy' must be MlpPolicy for algo {algo!r} "
-                                   f"(its own squashed-Gaussian policy; got {policy!r})")
+        allowed = ["MlpPolicy"] + [p for p, a in STARTED_POLICIES.items() if a == algo]
+        if POLICY_NAMES.get(policy) not in allowed:
+            raise TrainConfigError(f"{where}: field 'policy' must be one of {allowed} for algo "
+                                   f"{algo!r} (its own squashed-Gaussian policy; got "
+                                   f"{policy!r})")
         return algo
     if algo is not None and algo != implied:
         raise TrainConfigError(f"{where}: field 'algo' is {algo!r}, but policy {policy!r} is "
@@ -307,7 +317,9 @@ class TrainConfig:
                               "(BoundedMlpPolicy: the first-wave name), trained by PPO; "
                               "MlpLstmPolicy or abb_gym.rl.networks.BoundedMlpLstmPolicy "
                               "(memory), trained by sb3-contrib's RecurrentPPO (rl_zoo3: "
-                              "--algo ppo_lstm); MlpPolicy with algo sac or tqc")
+                              "--algo ppo_lstm); MlpPolicy with algo sac or tqc, or "
+                              "abb_gym.rl.networks.StartedSACPolicy / StartedTQCPolicy "
+                              "(their initial action mean set)")
     normalize: dict[str, Any] | None = declare(kind="any",
                                                factory=lambda: {"norm_obs": True,
                                                                 "norm_reward": True},
