@@ -104,12 +104,18 @@ def _started_sac_class() -> type:
     return _named(StartedSACPolicy)
 
 
-def _started_tqc_class() -> type:
+def _contrib(module: str, name: str, what: str) -> type:
+    """Class ``name`` of sb3-contrib's ``module``; an ImportError saying what needs it."""
+    import importlib
     try:
-        from sb3_contrib.tqc.policies import TQCPolicy
+        return getattr(importlib.import_module(module), name)
     except ImportError as exc:
-        raise ImportError(f"TQC needs sb3-contrib: pip install -c constraints.txt "
+        raise ImportError(f"{what} needs sb3-contrib: pip install -c constraints.txt "
                           f"'abb-gym[train]' ({exc})") from exc
+
+
+def _started_tqc_class() -> type:
+    TQCPolicy = _contrib("sb3_contrib.tqc.policies", "TQCPolicy", "TQC")
 
     class StartedTQCPolicy(_StartedActor, TQCPolicy):
         """TQC's ``MlpPolicy`` with ``action_mean_init`` (see :class:`_StartedActor`)."""
@@ -125,11 +131,9 @@ def _named(cls: type) -> type:
 
 
 def _recurrent_class() -> type:
-    try:
-        from sb3_contrib.common.recurrent.policies import RecurrentActorCriticPolicy
-    except ImportError as exc:
-        raise ImportError(f"the recurrent policies (RecurrentPPO) need sb3-contrib: pip install "
-                          f"-c constraints.txt 'abb-gym[train]' ({exc})") from exc
+    RecurrentActorCriticPolicy = _contrib("sb3_contrib.common.recurrent.policies",
+                                          "RecurrentActorCriticPolicy",
+                                          "the recurrent policy (RecurrentPPO)")
 
     class BoundedMlpLstmPolicy(_BoundedMean, RecurrentActorCriticPolicy):
         """sb3-contrib's ``MlpLstmPolicy`` with a ``tanh``-bounded action mean (see the
