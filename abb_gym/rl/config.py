@@ -227,7 +227,7 @@ def config_path(name_or_path: str | os.PathLike) -> Path:
     return locate("ppo", name_or_path, "PPO config", TrainConfigError)
 
 
-def _ppo_keywords(algo: str = "ppo") -> set[str]:
+def _algorithm_keywords(algo: str = "ppo") -> set[str]:
     params = set(inspect.signature(algorithm_class(algo).__init__).parameters)
     return params - {"self", "policy", "env", "policy_kwargs", "seed", "device",
                      "_init_setup_model", "verbose"}
@@ -401,12 +401,12 @@ class TrainConfig:
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
         algo = _check_algorithm(where, raw.get("policy", "MlpPolicy"), raw.pop("algo", None))
-        ppo_keys = _ppo_keywords(algo)
-        unknown = sorted(set(raw) - own - ppo_keys, key=str)
+        algo_keys = _algorithm_keywords(algo)
+        unknown = sorted(set(raw) - own - algo_keys, key=str)
         if unknown:
             raise TrainConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
                                    f"{sorted(own)} and the {ALGORITHMS[algo][1]} keywords "
-                                   f"{sorted(ppo_keys)}")
+                                   f"{sorted(algo_keys)}")
         values: dict[str, Any] = {}
         for key in own & set(raw):
             v = raw.pop(key)
@@ -620,7 +620,8 @@ def _zoo_entry_problems(entry: Any, algo: str | None = None) -> list[str]:
         problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
     if algo not in ALGORITHMS:
         algo = None
-    ppo_keys = _ppo_keywords(algorithm_of(policy, algo) if isinstance(policy, str) else "ppo")
+    algo = algorithm_of(policy, algo) if isinstance(policy, str) else "ppo"
+    algo_keys = _algorithm_keywords(algo)
     for key in entry:
         if key in LEGACY_ENTRY_KEYS or key == "tensorboard_log":
             why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"
@@ -630,8 +631,9 @@ def _zoo_entry_problems(entry: Any, algo: str | None = None) -> list[str]:
         elif key in ZOO_OWN_KEYWORDS:
             problems.append(f"{key!r} under the environment id: rl_zoo3 sets it from its "
                             f"command line")
-        elif key not in ZOO_KEYS and key not in ppo_keys:
-            problems.append(f"{key!r} is neither an rl_zoo3 key nor a PPO keyword")
+        elif key not in ZOO_KEYS and key not in algo_keys:
+            problems.append(f"{key!r} is neither an rl_zoo3 key nor a {ALGORITHMS[algo][1]} "
+                            f"keyword")
     return problems
 
 
