@@ -254,3 +254,20 @@ def test_the_training_share_benchmark_times_the_environment_and_puts_it_back():
     assert r["env_steps"] >= 1024
     assert 0.0 < r["env_s"] < r["learn_s"] and 0.0 < r["env_share"] < 1.0
     assert (NativeVecEnv.step_wait, NativeVecEnv.reset) == before
+
+
+def test_a_frame_stacked_agent_is_evaluated_at_its_own_control_interval(tmp_path, train_config):
+    """The frames of a stack are one control interval apart: an agent trained with a stack at
+    50 ms must see 50 ms frames in evaluation, not 10 ms ones with its actions held."""
+    from abb_gym.evaluation.evaluate import evaluate
+    conf = {SPEED: dict(SMOKE[SPEED], n_timesteps=512, eval_freq=10_000,
+                        checkpoint_freq=10_000,
+                        env_kwargs=dict(SMOKE[SPEED]["env_kwargs"], frame_stack=3))}
+    assert train_config(conf, tmp_path, seed=1) == 0
+    pol = load_policy(tmp_path / "run")
+    assert pol.env_kwargs["control_interval"] == 0.05 and pol.env_kwargs["frame_stack"] == 3
+    result = evaluate(SPEED, "yoshida_odd", f"ppo:{tmp_path / 'run'}", episodes=2, seed=0)
+    env = make_native_env(SPEED, 1, dict(scene="yoshida_odd", preset="test",
+                                         **pol.env_kwargs))
+    assert env.unwrapped.setup.control_interval == 0.05
+    assert len(result.episodes) == 2

@@ -656,6 +656,11 @@ def observation_kwargs(policy_env: Mapping[str, Any]) -> dict[str, Any]:
     agents saved before a field existed lack it and use the preset's value."""
     out: dict[str, Any] = {"observe_balls": True} if policy_env.get("observe_balls") else {}
     out.update({k: copy.deepcopy(policy_env[k]) for k in OBSERVATION_FIELDS if k in policy_env})
+    # a frame stack holds the last k observations of the environment's own steps: its frames
+    # are one control interval apart, so the agent's interval is part of its observation (on
+    # a finer environment, holding each action, it would see k frames of a shorter past)
+    if int(policy_env.get("frame_stack") or 1) > 1 and "control_interval" in policy_env:
+        out["control_interval"] = policy_env["control_interval"]
     return out
 
 
