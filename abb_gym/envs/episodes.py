@@ -268,52 +268,15 @@ def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None
          ) -> tuple[float, float, np.ndarray, float, float, float, float, int]:
     """One environment's episode values ``(imbalance, phase, ball angles, drag scale, rolling
     resistance scale, critical-speed scale, support-damping scale, noise key)``: the preset's
-    random draws from ``rng`` (imbalance ratio, phase, ball angles, drag scale,
-    rolling-resistance scale, critical-speed scale, support-damping scale: those that are
-    randomised, in this order; then the noise key if the observation is noisy), then
-    ``options`` (:data:`RESET_OPTIONS`) in their place."""
+    random draws from ``rng`` (:func:`_preset_draws`), then ``options``
+    (:data:`RESET_OPTIONS`) in their place."""
     sc = setup.scene
-    rz = setup.config.randomize
     nb = sc.ball_count
     cap = sc.balancing_capacity
-    imbalance = sc.imbalance
-    phase = 0.0
-    angles = np.asarray(sc.ball_angles0, dtype=float).copy()
-    drag = 1.0
-    roll = 1.0
-    crit = 1.0
-    damp = 1.0
-    key = 0
-    count = sum(1 for r in (rz.imbalance_ratio, rz.imbalance_phase, rz.ball_drag_scale,
-                            rz.rolling_resistance_scale, rz.critical_speed_scale,
-                            rz.support_damping_scale) if r is not None)
-    count += nb if rz.ball_angles is not None else 0
-    if count:
-        u = rng.random(count)
-        k = 0
-        if rz.imbalance_ratio is not None:
-            imbalance = float(_uniform(rz.imbalance_ratio, u[k])) * cap
-            k += 1
-        if rz.imbalance_phase is not None:
-            phase = float(_uniform(rz.imbalance_phase, u[k]))
-            k += 1
-        if rz.ball_angles is not None:
-            angles = _uniform(rz.ball_angles, u[k:k + nb])
-            k += nb
-        if rz.ball_drag_scale is not None:
-            drag = float(_uniform(rz.ball_drag_scale, u[k]))
-            k += 1
-        if rz.rolling_resistance_scale is not None:
-            roll = float(_uniform(rz.rolling_resistance_scale, u[k]))
-            k += 1
-        if rz.critical_speed_scale is not None:
-            crit = float(_uniform(rz.critical_speed_scale, u[k]))
-            k += 1
-        if rz.support_damping_scale is not None:
-            damp = float(_uniform(rz.support_damping_scale, u[k]))
-    sync = setup.config.sync_vibration
-    if sync.enabled and sync.noise > 0.0:
-        key = int(rng.integers(0, sensors.KEY_BOUND))
+    drawn = [v[0] for v in _preset_draws(setup, [rng])]
+    imbalance, phase, drag, roll, crit, damp = (float(drawn[k]) for k in (0, 1, 3, 4, 5, 6))
+    angles = drawn[2].copy()
+    key = int(drawn[7])
     if options is not None and not isinstance(options, Mapping):
         raise ValueError(f"options must be a dict with keys from {list(RESET_OPTIONS)} (got "
                          f"{_show(options)})")
@@ -378,13 +341,23 @@ def draw_rows(setup: Any, rngs: Sequence[np.random.Generator],
     resistance scale, critical-speed scale, support-damping scale, noise key)``.
 
     Without reset options (the autoreset of a vector environment) the values are mapped onto
-    the preset's ranges for all rows at once; each generator still gives its own draws in
-    :func:`draw`'s order, so the values are :func:`draw`'s bit for bit (the same IEEE
-    operations, tested) and every seeded episode is unchanged.  With options, row by row."""
+    the preset's ranges for all rows at once (:func:`_preset_draws`, which :func:`draw`
+    reads too); each generator still gives its own draws in the same order, so every seeded
+    episode is unchanged.  With options, row by row through :func:`draw`."""
     if not _no_options(options):
         values = [draw(setup, rng, None if options is None else options[k])
                   for k, rng in enumerate(rngs)]
         return tuple(np.array(v) for v in zip(*values))
+    return _preset_draws(setup, rngs)
+
+
+def _preset_draws(setup: Any, rngs: Sequence[np.random.Generator]) -> tuple[np.ndarray, ...]:
+    """The preset's random draws of every row, as arrays over rows (:func:`draw_rows`'
+    layout): row ``k`` takes one ``rngs[k].random`` call for the randomised fields (imbalance
+    ratio, phase, ball angles, drag scale, rolling-resistance scale, critical-speed scale,
+    support-damping scale: those that are randomised, in this order; the scene's values for
+    the others), then the noise key if the observation is noisy; angles reduced to
+    [-pi, pi]."""
     sc = setup.scene
     rz = setup.config.randomize
     nb = sc.ball_count
