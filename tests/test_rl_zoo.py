@@ -61,6 +61,9 @@ def test_shipped_configs_are_in_the_zoo_format():
                                                           r"allowed"),
     ({"eval_freq": 100}, r"'eval_freq' under the environment id: .* move it to the _abb_gym"),
     ({"tensorboard_log": "tb"}, r"'tensorboard_log' under .* passes its own tensorboard_log"),
+    ({"shaping": {"observation": "sync_amplitude"}},
+     r"'shaping' under the environment id: .* move it to the _abb_gym section"),
+    ({"algo": "sac"}, r"'algo' under the environment id: .* move it to the _abb_gym section"),
     ({"seed": 3}, r"'seed' under the environment id: rl_zoo3 sets it from its command line"),
     ({"learning_rate": "exp_1e-3"}, r"'learning_rate': rl_zoo3 reads a string only as "
                                     r"lin_<start>"),

@@ -103,11 +103,8 @@ class AgentFiles:
 def entry_algorithm(entry: Mapping[str, Any], data: Mapping[str, Any] | None = None) -> str:
     """The algorithm of a config entry: ``_abb_gym.algo`` of the whole file ``data`` if set,
     else the one its ``policy`` implies (``ppo``, ``ppo_lstm``)."""
-    from .config import ABB_GYM_SECTION, ALGORITHMS, algorithm_of
-    section = (data or {}).get(ABB_GYM_SECTION)
-    algo = section.get("algo") if isinstance(section, Mapping) else None
-    return algorithm_of(str(entry.get("policy", "MlpPolicy")),
-                        algo if algo in ALGORITHMS else None)
+    from .config import algorithm_of, section_algorithm
+    return algorithm_of(str(entry.get("policy", "MlpPolicy")), section_algorithm(data or {}))
 
 
 def _label(path: Path) -> str:
@@ -339,9 +336,8 @@ def custom_objects_for(entry: Mapping[str, Any]) -> dict | None:
     (agents of the first wave pickled an older module path for it)."""
     from . import networks
     policy = str(entry.get("policy", ""))
-    for name in ("BoundedMlpPolicy", "BoundedMlpLstmPolicy", "StartedSACPolicy",
-                 "StartedTQCPolicy"):
-        if policy.endswith(name):
+    for path, name in networks.POLICIES.items():
+        if path != name and policy.endswith(name):  # abb-gym's own classes, not SB3's aliases
             return {"policy_class": getattr(networks, name)}
     return None
 

@@ -113,8 +113,8 @@ __all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_F
            "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
-           "zoo_problems", "TrainConfigError", "ALGORITHMS", "algorithm_of",
-           "algorithm_class"]
+           "zoo_problems", "TrainConfigError", "ALGORITHMS", "algorithm_of", "algorithm_class",
+           "import_class", "section_algorithm"]
 
 #: preset fields that shape the observation (the environment must use the agent's values)
 OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
@@ -133,8 +133,6 @@ ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
                 "curriculum", "algo")
 #: of those, the ones only the ``_abb_gym`` section may hold
 SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo")
-#: of those, the ones a first-wave file holds under the environment id (still read)
-LEGACY_ENTRY_KEYS = tuple(k for k in ABB_GYM_KEYS if k not in SECTION_ONLY_KEYS)
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 #: keys rl_zoo3 consumes itself under the id (``ExperimentManager._preprocess_hyperparams``);
@@ -200,17 +198,31 @@ def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
     return implied
 
 
-def algorithm_class(algo: str) -> type:
-    """The SB3 (or sb3-contrib) class of ``algo`` (a key of :data:`ALGORITHMS`); an
-    ``ImportError`` naming the package if it is missing."""
+def import_class(module: str, name: str, what: str) -> type:
+    """Class ``name`` of ``module`` (part of the training extra); an ``ImportError`` saying
+    what needs which package and how to install it, if it is missing."""
     import importlib
-    module, name = ALGORITHMS[algo]
     try:
         return getattr(importlib.import_module(module), name)
     except ImportError as exc:
-        package = module.replace("_", "-")
-        raise ImportError(f"{name} ({algo}) needs {package}: pip install -c constraints.txt "
+        package = module.split(".")[0].replace("_", "-")
+        raise ImportError(f"{what} needs {package}: pip install -c constraints.txt "
                           f"'abb-gym[train]' ({exc})") from exc
+
+
+def algorithm_class(algo: str) -> type:
+    """The SB3 (or sb3-contrib) class of ``algo`` (a key of :data:`ALGORITHMS`); an
+    ``ImportError`` naming the package if it is missing."""
+    module, name = ALGORITHMS[algo]
+    return import_class(module, name, f"{name} ({algo})")
+
+
+def section_algorithm(data: Mapping[str, Any]) -> str | None:
+    """``_abb_gym.algo`` of a whole config file's content, if it names an algorithm (None:
+    the policy decides, :func:`algorithm_of`)."""
+    section = data.get(ABB_GYM_SECTION)
+    algo = section.get("algo") if isinstance(section, Mapping) else None
+    return algo if algo in ALGORITHMS else None
 
 
 class TrainConfigError(ConfigError):
@@ -552,8 +564,7 @@ def zoo_problems(config: str | os.PathLike | Mapping[str, Any],
     if not ids:
         return ["the file has no environment id entry (rl_zoo3 reads only the entry of "
                 "--env)"]
-    section = data.get(ABB_GYM_SECTION)
-    algo = section.get("algo") if isinstance(section, Mapping) else None
+    algo = section_algorithm(data)
     out: list[str] = []
     for key in ids:
         out += [f"{key}: {p}" for p in _zoo_entry_problems(data[key], algo)]
@@ -618,12 +629,10 @@ def _zoo_entry_problems(entry: Any, algo: str | None = None) -> list[str]:
     env_kwargs = entry.get("env_kwargs")
     if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
         problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
-    if algo not in ALGORITHMS:
-        algo = None
     algo = algorithm_of(policy, algo) if isinstance(policy, str) else "ppo"
     algo_keys = _algorithm_keywords(algo)
     for key in entry:
-        if key in LEGACY_ENTRY_KEYS or key == "tensorboard_log":
+        if key in ABB_GYM_KEYS:
             why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"
                    else "rl_zoo3 passes it to PPO, which does not know it")
             problems.append(f"{key!r} under the environment id: {why}; move it to the "

@@ -32,6 +32,8 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 import torch
 from torch import nn
 
+from .config import import_class
+
 __all__ = ["BoundedMlpPolicy", "BoundedMlpLstmPolicy", "StartedSACPolicy", "StartedTQCPolicy",
            "POLICIES", "policy_class"]
 
@@ -104,18 +106,8 @@ def _started_sac_class() -> type:
     return _named(StartedSACPolicy)
 
 
-def _contrib(module: str, name: str, what: str) -> type:
-    """Class ``name`` of sb3-contrib's ``module``; an ImportError saying what needs it."""
-    import importlib
-    try:
-        return getattr(importlib.import_module(module), name)
-    except ImportError as exc:
-        raise ImportError(f"{what} needs sb3-contrib: pip install -c constraints.txt "
-                          f"'abb-gym[train]' ({exc})") from exc
-
-
 def _started_tqc_class() -> type:
-    TQCPolicy = _contrib("sb3_contrib.tqc.policies", "TQCPolicy", "TQC")
+    TQCPolicy = import_class("sb3_contrib.tqc.policies", "TQCPolicy", "TQC")
 
     class StartedTQCPolicy(_StartedActor, TQCPolicy):
         """TQC's ``MlpPolicy`` with ``action_mean_init`` (see :class:`_StartedActor`)."""
@@ -131,9 +123,9 @@ def _named(cls: type) -> type:
 
 
 def _recurrent_class() -> type:
-    RecurrentActorCriticPolicy = _contrib("sb3_contrib.common.recurrent.policies",
-                                          "RecurrentActorCriticPolicy",
-                                          "the recurrent policy (RecurrentPPO)")
+    RecurrentActorCriticPolicy = import_class("sb3_contrib.common.recurrent.policies",
+                                              "RecurrentActorCriticPolicy",
+                                              "the recurrent policy (RecurrentPPO)")
 
     class BoundedMlpLstmPolicy(_BoundedMean, RecurrentActorCriticPolicy):
         """sb3-contrib's ``MlpLstmPolicy`` with a ``tanh``-bounded action mean (see the
