@@ -346,9 +346,10 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.ME
         if group.size == 0:
             continue
         group_lanes = min(lanes, lanes_per_block(group.size))
-        spec = 0
-        for e in group:
-            spec |= mdl.spec_of(p[e], seg_d[e, :max(int(nseg[e]), 1)])
+        # the union of the group's effects over the valid rows of each drive table, in one
+        # call (spec_of per environment cost 47 us each: 4 times the kernel at 1024 runs)
+        valid = np.arange(seg_d.shape[1]) < np.maximum(nseg[group], 1)[:, None]
+        spec = mdl.spec_of(p[group], seg_d[group][valid])
         call = (_run_batch_specialised if resolve_kernel(kernel, group_lanes) == "specialised"
                 else _run_batch_specialised.generic)
         call(*args, group, group_lanes, int(method), nb, spec)
