@@ -24,6 +24,7 @@ def test_speed_benchmark_parts_measure_what_they_name():
     from abb_gym.benchmarks import env_speed
     vec = env_speed.vector_rate(64, 3, kernel="generic")
     assert vec["kernel"] == "generic" and vec["rate"] > 0 and vec["reset_us"] > 0
+    assert env_speed.batch_rate(16, 2) > 0
     cp_vec, cp_single = env_speed.cartpole_rates(16, 3)
     assert cp_vec > 0 and cp_single > 0
     cold = env_speed.cold_start(with_empty_cache=False)
@@ -75,6 +76,7 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
          {"measurement": "scipy", "value": "1", "target": "-", "note": "-"}], 100.0)))
     rate = {"rate": 1e6, "reset_us": 1.0, "kernel": "generic"}
     monkeypatch.setattr(env_speed, "vector_rate", stand_in("vector", rate))
+    monkeypatch.setattr(env_speed, "batch_rate", stand_in("batch", 1e6))
     monkeypatch.setattr(env_speed, "single_rate", stand_in("single", 1e5))
     monkeypatch.setattr(env_speed, "cartpole_rates", stand_in("cartpole", (1e6, 1e4)))
     monkeypatch.setattr(env_speed, "cold_start", stand_in("cold", {
@@ -84,12 +86,12 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     assert main(["bench", "speed", "--quick", "--out", str(tmp_path)]) == 0
     total = rows_printed()
     # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
-    # general kernel, then CartPole/single/speed-up once both are measured, 2 cold-start rows,
-    # the memory
+    # general kernel, the batch simulation, then CartPole/single/speed-up once both are
+    # measured, 2 cold-start rows, the memory
     assert seen == [("run-up generic", 0), ("run-up specialised", 1), ("stepping", 2),
                     ("vector", 4), ("vector", 5), ("vector", 6), ("vector", 7),
-                    ("single", 8), ("cartpole", 8), ("cold", 11), ("memory", 13),
-                    ("effects", 14)]
-    assert total == 15
+                    ("batch", 8), ("single", 9), ("cartpole", 9), ("cold", 12),
+                    ("memory", 14), ("effects", 15)]
+    assert total == 16
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")

@@ -4,6 +4,8 @@
   kernel (and the general kernel at 1024), **resets included**: episodes are cut at
   :data:`EPISODE_STEPS` control steps, so one sub-environment in 100 resets at each step, and
   the reset of all sub-environments is timed on its own;
+* batch simulation without an environment (:func:`abb_gym.physics.batch.run_batch`, the
+  parameter studies' entry point) over as many run-ups, in 10 ms intervals;
 * the single environment through ``gym.make`` (lean info, the default);
 * Gymnasium's own ``CartPoleVectorEnv`` and ``CartPole-v1`` in the same run, as the peer
   reference of what a vector environment costs per env-step in plain numpy;
@@ -30,7 +32,8 @@ SCENE = "yoshida_odd"
 EPISODE_STEPS = 100  # 1 s episodes at 10 ms: resets are 1 % of the sub-environment steps
 VECTOR_SIZES = (64, 1024, 4096)
 
-__all__ = ["measure", "vector_rate", "single_rate", "cartpole_rates", "cold_start"]
+__all__ = ["measure", "vector_rate", "batch_rate", "single_rate", "cartpole_rates",
+           "cold_start"]
 
 
 def _make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4"):
@@ -62,6 +65,45 @@ def vector_rate(num_envs: int, n_steps: int, kernel: str | None = None,
     env.close()
     return {"rate": num_envs * n_steps / best_step, "reset_us": best_reset / num_envs * 1e6,
             "kernel": used}
+
+
+def batch_rate(n_runs: int, intervals: int, repeats: int = 1) -> float:
+    """Simulated 10 ms intervals per second of :func:`abb_gym.physics.batch.run_batch` over
+    ``n_runs`` run-ups of the scene (half the drive's acceleration, ball drag spread over
+    0.7-1.3 of nominal so that the runs take different step sizes), output every 10 ms (best
+    of ``repeats``; the first call compiles or loads the kernel)."""
+    from ..physics import SpeedProfile, batch, load_scene
+    from ..physics import model as mdl
+    from ..physics.simulate import default_step, initial_state
+    scene = load_scene(SCENE)
+    w = scene.drive_operating_speed
+    drive = SpeedProfile.ramp(scene.drive_max_acceleration / 2, w)
+    t_out = np.linspace(0.0, 0.01 * intervals, intervals + 1)
+    _, rows = drive.segment_table(t_out[-1], scene)
+    ns = 2 * (3 + scene.ball_count)
+    s0 = np.empty((n_runs, ns))
+    p = np.empty((n_runs, mdl.N_PARAMS))
+    b = np.empty((n_runs, scene.ball_count, mdl.N_BALL_PARAMS))
+    h = np.empty(n_runs)
+    for i, scale in enumerate(np.linspace(0.7, 1.3, n_runs)):
+        sc = scene.replace(ball_drag=[scale * v for v in scene.ball_drag])
+        s0[i] = initial_state(sc, drive)
+        p[i], b[i] = mdl.pack_parameters(sc)
+        h[i] = default_step(sc, w)
+    seg_d = np.repeat(rows[None], n_runs, axis=0)
+    nseg = np.full(n_runs, len(rows))
+    out = np.empty((n_runs, len(t_out), ns))
+    status = np.zeros((n_runs, 4))
+    args = (s0, t_out, seg_d, nseg, p, b, h, out, status)
+    batch.run_batch(*args)
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        batch.run_batch(*args)
+        best = min(best, time.perf_counter() - start)
+    if not np.all(status[:, 0] == 0):
+        raise RuntimeError("batch benchmark: a run failed")
+    return n_runs * intervals / best
 
 
 def single_rate(n_steps: int, repeats: int = 1) -> float:
@@ -154,7 +196,7 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
     from tqdm import tqdm
     repeats = 1 if quick else 3
     steps = {64: 400, 1024: 100, 4096: 30} if not quick else {64: 40, 1024: 10, 4096: 5}
-    bar = tqdm(total=len(VECTOR_SIZES) + 5, desc="bench speed (environments)", leave=False)
+    bar = tqdm(total=len(VECTOR_SIZES) + 6, desc="bench speed (environments)", leave=False)
     note = f"{SCENE}, rk4 at the default step, random actions, {EPISODE_STEPS}-step episodes"
     try:
         vec = {}
@@ -171,6 +213,13 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
         yield {"measurement": "the same at 1024 with the general kernel (kernel='generic')",
                "value": f"{generic['rate']:,.0f} env-steps/s", "target": "-",
                "note": f"specialised/general = {vec[1024]['rate'] / generic['rate']:.2f}x"}
+        batch_runs = batch_rate(1024, 10 if quick else 100, repeats)
+        bar.update()
+        yield {"measurement": "batch simulation without an environment (physics.batch."
+                              "run_batch), 1024 run-ups",
+               "value": f"{batch_runs:,.0f} run-intervals/s (10 ms each)", "target": "-",
+               "note": "ball drag 0.7-1.3 of nominal, output every 10 ms; vector env at 1024 "
+                       f"= {vec[1024]['rate'] / batch_runs:.2f}x of it"}
         single = single_rate(3000 if quick else 30000, repeats)
         bar.update()
         cp_vec, cp_single = cartpole_rates(1024, 20 if quick else 200)
