@@ -58,19 +58,11 @@ def _vector(kind: str, kernel: str, num_envs: int) -> Callable[[], None]:
 def _batch():
     import numpy as np
     from .physics import SpeedProfile, batch, load_scene
-    from .physics import model as mdl
-    from .physics.simulate import default_step, initial_state
     scene = load_scene("yoshida_odd")
-    drive = SpeedProfile.ramp(40.0, 130.0)
-    _, rows = drive.segment_table(1.0, scene)
-    p, b = mdl.pack_parameters(scene)
-    n = 2
-    s0 = np.repeat(initial_state(scene, drive)[None], n, axis=0)
-    out = np.empty((n, 2, s0.shape[1]))
-    batch.run_batch(s0, np.array([0.0, 0.01]), np.repeat(rows[None], n, axis=0),
-                    np.full(n, len(rows)), np.repeat(p[None], n, axis=0),
-                    np.repeat(b[None], n, axis=0), default_step(scene, 130.0), out,
-                    np.zeros((n, 4)))
+    inputs = batch.run_inputs([scene, scene], SpeedProfile.ramp(40.0, 130.0), 1.0, 130.0)
+    s0 = inputs[0]
+    batch.run_batch(s0, np.array([0.0, 0.01]), *inputs[1:],
+                    np.empty((len(s0), 2, s0.shape[1])), np.zeros((len(s0), 4)))
 
 
 def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:

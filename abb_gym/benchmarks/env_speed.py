@@ -73,26 +73,14 @@ def batch_rate(n_runs: int, intervals: int, repeats: int = 1) -> float:
     0.7-1.3 of nominal so that the runs take different step sizes), output every 10 ms (best
     of ``repeats``; the first call compiles or loads the kernel)."""
     from ..physics import SpeedProfile, batch, load_scene
-    from ..physics import model as mdl
-    from ..physics.simulate import default_step, initial_state
     scene = load_scene(SCENE)
     w = scene.drive_operating_speed
     drive = SpeedProfile.ramp(scene.drive_max_acceleration / 2, w)
     t_out = np.linspace(0.0, 0.01 * intervals, intervals + 1)
-    _, rows = drive.segment_table(t_out[-1], scene)
-    ns = 2 * (3 + scene.ball_count)
-    s0 = np.empty((n_runs, ns))
-    p = np.empty((n_runs, mdl.N_PARAMS))
-    b = np.empty((n_runs, scene.ball_count, mdl.N_BALL_PARAMS))
-    h = np.empty(n_runs)
-    for i, scale in enumerate(np.linspace(0.7, 1.3, n_runs)):
-        sc = scene.replace(ball_drag=[scale * v for v in scene.ball_drag])
-        s0[i] = initial_state(sc, drive)
-        p[i], b[i] = mdl.pack_parameters(sc)
-        h[i] = default_step(sc, w)
-    seg_d = np.repeat(rows[None], n_runs, axis=0)
-    nseg = np.full(n_runs, len(rows))
-    out = np.empty((n_runs, len(t_out), ns))
+    scenes = [scene.replace(ball_drag=[scale * v for v in scene.ball_drag])
+              for scale in np.linspace(0.7, 1.3, n_runs)]
+    s0, seg_d, nseg, p, b, h = batch.run_inputs(scenes, drive, t_out[-1], w)
+    out = np.empty((n_runs, len(t_out), s0.shape[1]))
     status = np.zeros((n_runs, 4))
     args = (s0, t_out, seg_d, nseg, p, b, h, out, status)
     batch.run_batch(*args)

@@ -57,9 +57,11 @@ from . import drive_law as dl
 from . import integrators as integ
 from . import model as mdl
 from . import sensors
+from .simulate import default_step, initial_state
 from .specialise import Specialised, resolve_kernel
 
-__all__ = ["advance_block", "run_batch", "Blocks", "lanes_per_block", "lane_order"]
+__all__ = ["advance_block", "run_batch", "run_inputs", "Blocks", "lanes_per_block",
+           "lane_order"]
 
 # f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators
 (F_T0, F_T1, F_HMAX, F_TP, F_PE, F_H, F_TC, F_TT, F_TFAIL, W_INT, W_MAX, W_XS, W_YS,
@@ -313,6 +315,21 @@ def _run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, order, lanes, 
 
 _run_batch_specialised = Specialised(_run_batch, literal=(11, 12, 13),
                                      names=("method", "balls", "effects"))
+
+
+def run_inputs(scenes, drive, t_end: float, max_speed: float) -> tuple:
+    """The per-run inputs of :func:`run_batch` for one run per scene in ``scenes`` under the
+    one ``drive`` up to ``t_end`` [s]: ``(s0, seg_d, nseg, p, b, dt_max)``, each run from its
+    scene's initial state with the default RK4 step for ``max_speed`` [rad/s]."""
+    scenes = list(scenes)
+    _, rows = drive.segment_table(t_end, scenes[0])
+    n = len(scenes)
+    s0 = np.stack([initial_state(sc, drive) for sc in scenes])
+    packed = [mdl.pack_parameters(sc) for sc in scenes]
+    p = np.stack([pk[0] for pk in packed])
+    b = np.stack([pk[1] for pk in packed])
+    dt_max = np.array([default_step(sc, max_speed) for sc in scenes])
+    return s0, np.repeat(rows[None], n, axis=0), np.full(n, len(rows)), p, b, dt_max
 
 
 def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.METHOD_RK4,
