@@ -243,3 +243,23 @@ def test_vector_render_and_pickle():
     o2, r2, *_ = clone.step(a)
     assert np.array_equal(o1, o2) and np.array_equal(r1, r2)
     vec.close()
+
+
+def test_failure_info_is_masked_to_the_rows_that_failed():
+    """One sub-environment at full torque overspeeds while the other stays at rest: the
+    failure message and its ``_failure`` mask name that row only."""
+    env = gym.make_vec("abb_gym/RunUpTorque-v0", num_envs=2,
+                       vectorization_mode="vector_entry_point", scene="yoshida_odd",
+                       control_interval=0.05)
+    env.reset(seed=0)
+    actions = np.array([[1.0], [0.0]], dtype=np.float32)
+    for _ in range(200):
+        _, _, terminated, _, info = env.step(actions)
+        if "failure" in info:
+            break
+    else:
+        pytest.fail("full torque never overspeeded in 10 s")
+    assert info["_failure"].tolist() == [True, False]
+    assert info["failure"][0].startswith("overspeed") and info["failure"][1] is None
+    assert terminated.tolist() == [True, False]
+    env.close()
