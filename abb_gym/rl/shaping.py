@@ -4,10 +4,13 @@ The balancer's largest reward term, the residual vibration, is paid once at the 
 run-up, seconds after the decisions that decided it.  Shaping adds, per decision,
 
     F = gamma * Phi(o') - Phi(o),        Phi(o) = -weight * o[observation]
+                                    or  Phi(o) = -weight * |o[observation] - target|
 
 with ``o[observation]`` one entry of the observation the policy sees (e.g. ``sync_amplitude``,
 the measured synchronous vibration: what a drive reads).  A drop of the vibration pays at
-once.  Why this form (Ng, Harada & Russell 1999, "Policy invariance under reward
+once.  With a ``target`` the potential is the distance from it, e.g. ``rotor_speed`` with
+target 1 on RunUpTorque, where the agent must hold the operating speed in the 0.2 % band
+itself and the terminal terms alone say only, seconds later, that it never settled.  Why this form (Ng, Harada & Russell 1999, "Policy invariance under reward
 transformations"): along any episode the shaping terms telescope to ``gamma^T Phi(o_T) -
 Phi(o_0)``, and with ``Phi = 0`` after a true end the sum is ``-Phi(o_0)``, the same for every
 policy from the same start.  So every policy's discounted return changes by the same
@@ -19,7 +22,8 @@ observation.
 
 Only training sees it: the wrapper sits between ``VecMonitor`` (which logs the unshaped
 episode returns) and ``VecNormalize``; the held-out evaluations use the plain environment.
-Config: ``_abb_gym: {shaping: {observation: sync_amplitude, weight: 10.0}}``
+Config: ``_abb_gym: {shaping: {observation: sync_amplitude, weight: 10.0}}`` or
+``{observation: rotor_speed, weight: 50.0, target: 1.0}``
 (:class:`ShapingSettings`; :mod:`abb_gym.rl.config`).
 """
 from __future__ import annotations
@@ -44,6 +48,9 @@ class ShapingSettings:
                                                 "sync_amplitude)")
     weight: float = declare(1.0, ge=0.0, le=1e6, doc="Phi = -weight x that entry "
                                                      "(reward units per unit of it)")
+    target: float | None = declare(None, ge=-1e6, le=1e6, nullable=True,
+                                   doc="Phi = -weight x |entry - target| instead (null: the "
+                                       "entry itself)")
 
 
 def shaping_settings(value: Any, where: str, error: type[ValueError]) -> dict[str, Any] | None:
@@ -57,7 +64,10 @@ def shaping_settings(value: Any, where: str, error: type[ValueError]) -> dict[st
         raise error(f"{where}: field 'shaping.observation' is missing (an observation entry, "
                     f"e.g. sync_amplitude)")
     settings = build(ShapingSettings, dict(value), f"{where} shaping", error)
-    return {"observation": settings.observation, "weight": float(settings.weight)}
+    out = {"observation": settings.observation, "weight": float(settings.weight)}
+    if settings.target is not None:
+        out["target"] = float(settings.target)
+    return out
 
 
 def potential_index(names: Sequence[str], observation: str) -> int:
@@ -76,32 +86,41 @@ def _wrapper_base():
     return VecEnvWrapper
 
 
-def PotentialShaping(venv, index: int, weight: float, gamma: float):
+def PotentialShaping(venv, index: int, weight: float, gamma: float,
+                     target: float | None = None):
     """The shaping wrapper around an SB3 ``VecEnv`` (see the module docstring); built lazily,
     as SB3 is imported on first use.
 
     :param index: observation entry of the potential.
     :param weight: ``Phi = -weight * obs[index]`` (>= 0).
     :param gamma: the algorithm's discount factor, in (0, 1].
+    :param target: if given, ``Phi = -weight * |obs[index] - target|``.
     """
     if not (math.isfinite(weight) and weight >= 0):
         raise ValueError(f"shaping weight must be finite and >= 0 (got {weight!r})")
     if not 0 < gamma <= 1:
         raise ValueError(f"shaping gamma must be in (0, 1] (got {gamma!r})")
-    return _shaping_class()(venv, int(index), float(weight), float(gamma))
+    if target is not None and not math.isfinite(target):
+        raise ValueError(f"shaping target must be finite or None (got {target!r})")
+    return _shaping_class()(venv, int(index), float(weight), float(gamma),
+                            None if target is None else float(target))
 
 
 def _shaping_class():
     VecEnvWrapper = _wrapper_base()
 
     class _PotentialShaping(VecEnvWrapper):
-        def __init__(self, venv, index: int, weight: float, gamma: float):
+        def __init__(self, venv, index: int, weight: float, gamma: float,
+                     target: float | None):
             super().__init__(venv)
-            self.index, self.weight, self.gamma = index, weight, gamma
+            self.index, self.weight, self.gamma, self.target = index, weight, gamma, target
             self._phi = np.zeros(self.num_envs)
 
         def potential(self, obs: np.ndarray) -> np.ndarray:
-            return -self.weight * np.asarray(obs, dtype=np.float64)[..., self.index]
+            entry = np.asarray(obs, dtype=np.float64)[..., self.index]
+            if self.target is not None:
+                entry = np.abs(entry - self.target)
+            return -self.weight * entry
 
         def reset(self):
             obs = self.venv.reset()

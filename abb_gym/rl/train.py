@@ -357,7 +357,8 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     if cfg.shaping is not None:
         from .shaping import PotentialShaping, potential_index
         index = potential_index(venv.unwrapped.setup.obs_names, cfg.shaping["observation"])
-        env = PotentialShaping(env, index, cfg.shaping["weight"], ppo_kw.get("gamma", 0.99))
+        env = PotentialShaping(env, index, cfg.shaping["weight"], ppo_kw.get("gamma", 0.99),
+                               cfg.shaping.get("target"))
     if cfg.normalize is not None:
         norm_kw = dict(cfg.normalize)
         norm_kw.setdefault("gamma", ppo_kw.get("gamma", 0.99))
