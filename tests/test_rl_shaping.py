@@ -18,15 +18,15 @@ ENV = dict(scene="yoshida_odd", preset="varied", control_interval=0.05)
 
 
 def _episode(bootstrap_truncated: bool, episode_length: float | None, gamma: float,
-             action: float):
+             action: float, observation: str = "sync_amplitude", target: float | None = None):
     """One episode of sub-environment 0 with and without shaping (same seed, same actions):
-    the shaped and plain rewards, the potentials of the first and the terminal observation,
+    the shaped and plain rewards, the shaped entry of the first and the terminal observation,
     and whether it was truncated."""
     kwargs = dict(ENV, **({} if episode_length is None else {"episode_length": episode_length}))
     plain = make_sb3_env(SPEED, 2, kwargs, bootstrap_truncated=bootstrap_truncated)
     shaped_env = make_sb3_env(SPEED, 2, kwargs, bootstrap_truncated=bootstrap_truncated)
-    index = potential_index(shaped_env.unwrapped.setup.obs_names, "sync_amplitude")
-    shaped = PotentialShaping(shaped_env, index, 3.0, gamma)
+    index = potential_index(shaped_env.unwrapped.setup.obs_names, observation)
+    shaped = PotentialShaping(shaped_env, index, 3.0, gamma, target)
     out = {}
     for name, env in (("plain", plain), ("shaped", shaped)):
         env.seed(7)
@@ -58,6 +58,21 @@ def test_the_shaping_of_an_episode_sums_to_the_start_potential(action):
     assert np.max(np.abs(shaped - plain)) > 1e-3
 
 
+def test_a_target_makes_the_potential_the_distance_from_it():
+    # rotor_speed from 0 at rest to 1 at the operating speed: Phi = -3 |o - 1| starts at -3
+    # and pays most while the rotor approaches w_op, where a plain -3 o would penalise it
+    gamma = 0.98
+    out = _episode(False, None, gamma, 0.9, "rotor_speed", 1.0)
+    plain, first, _, _ = out["plain"]
+    shaped, *_ = out["shaped"]
+    assert first == 0.0
+    discount = gamma ** np.arange(len(plain))
+    assert np.sum(discount * (shaped - plain)) == pytest.approx(3.0 * abs(first - 1.0),
+                                                                abs=1e-4)
+    # the run-up's first decision moves the rotor towards w_op: positive shaping
+    assert shaped[0] - plain[0] > 0.0
+
+
 def test_a_bootstrapped_truncation_keeps_the_terminal_potential():
     gamma = 0.95
     out = _episode(True, 2.0, gamma, 0.3)  # 2 s: truncated long before the operating speed
@@ -80,6 +95,8 @@ def _cfg(**shaping):
     ({"observation": "sync_amplitude", "weight": -1.0},
      r"shaping: field 'weight' must be in \[0, 1e\+06\]"),
     ({"observation": "sync_amplitude", "gain": 1.0}, r"unknown field\(s\) \['gain'\]"),
+    ({"observation": "rotor_speed", "target": "one"}, r"field 'target' must be in"),
+    ({"observation": "rotor_speed", "target": float("nan")}, r"field 'target'"),
     ("sync_amplitude", r"'shaping' must be a mapping"),
 ])
 def test_bad_shaping_settings_name_the_field(shaping, match):
