@@ -9,8 +9,10 @@ bar, so that the caches hold:
 * the general kernels: ``simulate`` with every compiled method, the single environment, the
   native vector environment and batch simulation (one compilation serves every scene and
   every action type);
-* the vectorised kernels specialised on the default scene (``yoshida_odd``) for the
-  speed-profile and torque actions (the vector environments of the training configurations).
+* the kernels specialised on the default scene (``yoshida_odd``) for the speed-profile and
+  torque actions: vectorised for the vector environments of the training configurations, and
+  on one lane for the single environment, which takes them whenever they need no compiling
+  (twice the general kernel's speed on one lane).
 
 The wheel ships these caches (``make wheel`` runs :func:`build` first), so a fresh install on
 a machine of the same CPU type starts without compiling; on another CPU, or for another
@@ -76,6 +78,8 @@ def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
         ("vector environment (general kernel)", _vector(speed, "generic", 4)),
         ("batch simulation (general kernel)", _batch),
         ("vector environment, yoshida_odd speed (vectorised)", _vector(speed, "specialised", 32)),
+        ("single environment, yoshida_odd speed and torque (specialised: 2x the general one)",
+         lambda: (_vector(speed, "specialised", 1)(), _vector(torque, "specialised", 1)())),
         ("vector environment, yoshida_odd torque (vectorised)",
          _vector(torque, "specialised", 32)),
     ]

@@ -12,6 +12,8 @@ import abb_gym  # noqa: F401  (registers the ids)
 from abb_gym.envs import ENV_IDS, BalancerVectorEnv
 from abb_gym.physics.specialise import VECTORISE_FROM
 
+SPEED = "abb_gym/RunUpSpeed-v0"
+
 SHORT = {"episode_length": 0.3, "settle_time": 0.05}
 
 
@@ -263,3 +265,49 @@ def test_failure_info_is_masked_to_the_rows_that_failed():
     assert info["failure"][0].startswith("overspeed") and info["failure"][1] is None
     assert terminated.tolist() == [True, False]
     env.close()
+
+
+def test_auto_on_a_few_lanes_takes_the_specialised_kernel_when_it_needs_no_compiling():
+    """"auto" below VECTORISE_FROM lanes (the single env, small vector envs) runs the
+    specialised kernel once it is compiled (here: by an env that asks for it; in the wheel:
+    its cache of the default scene), and the general one otherwise; both step bit for bit
+    alike."""
+    forced = make_vec(SPEED, 1, kernel="specialised")  # one lane: the serial kernel
+    forced.reset(seed=0)
+    forced.step(np.full((1, 1), 0.5, np.float32))  # compiles or loads the specialised kernel
+    single = gym.make(SPEED, info_level="full")
+    general = make_vec(SPEED, 1, kernel="generic")
+    assert single.unwrapped._bufs.kernel == "specialised"
+    assert general.unwrapped.kernel == "generic"
+    obs_s, _ = single.reset(seed=4)
+    obs_g, _ = general.reset(seed=4)
+    assert np.array_equal(obs_s, obs_g[0])
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        a = rng.uniform(-0.3, 1.0, size=(1, 1)).astype(np.float32)
+        out_s = single.step(a[0])
+        out_g = general.step(a)
+        assert np.array_equal(out_s[0], out_g[0][0])
+        assert out_s[1] == out_g[1][0]
+        if out_s[2] or out_s[3]:
+            break
+
+
+def test_cached_entry_compiles_nothing():
+    from numba import njit
+
+    from abb_gym.physics.specialise import Specialised, resolve_kernel
+
+    @njit  # no on-disk cache: nothing to load
+    def scaled(x, k):
+        return x * k
+
+    fn = Specialised(scaled, literal=(1,), names=("k",))
+    assert fn.cached_entry(2.0, 3) is None
+    assert scaled.signatures == []  # asking compiled nothing
+    assert fn(2.0, 3) == 6.0
+    assert fn.cached_entry(2.0, 3) is not None  # compiled in this process now
+    assert resolve_kernel("auto", 1, cached_ok=True) == "cached"
+    assert resolve_kernel("auto", 1) == "generic"
+    assert resolve_kernel("generic", 1, cached_ok=True) == "generic"
+    assert resolve_kernel("auto", VECTORISE_FROM, cached_ok=True) == "specialised"

@@ -161,8 +161,12 @@ class Buffers:
         self.order = np.arange(n, dtype=np.int64)
         self.n_balls = nb
         self.spec = setup.spec
-        self.kernel = resolve_kernel(kernel, self.blocks.lanes)
+        self.kernel = resolve_kernel(kernel, self.blocks.lanes, cached_ok=True)
         self._step = None
+        if self.kernel == "cached":
+            # "auto" on a few lanes: the specialised kernel if it needs no compiling
+            self._step = self._stepper().cached_entry(*self.kernel_args())
+            self.kernel = "generic" if self._step is None else "specialised"
 
     def kernel_args(self) -> tuple:
         """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``, in order."""
@@ -173,9 +177,12 @@ class Buffers:
         """The compiled step's entry point, called with :meth:`kernel_args` (compiled or
         loaded from the cache on the first call)."""
         if self._step is None:
-            step = kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
-            self._step = step.entry(*self.kernel_args(), generic=self.kernel == "generic")
+            self._step = self._stepper().entry(*self.kernel_args(),
+                                               generic=self.kernel == "generic")
         return self._step
+
+    def _stepper(self):
+        return kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
 
     def sort_lanes(self) -> None:
         """Group rows of equal step size into the same blocks (after resets)."""

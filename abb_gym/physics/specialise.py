@@ -28,12 +28,18 @@ KERNELS = ("auto", "generic", "specialised")
 VECTORISE_FROM = 8  # lanes per block from which "auto" picks the vectorised kernel
 
 
-def resolve_kernel(kernel: str | None, lanes: int) -> str:
+def resolve_kernel(kernel: str | None, lanes: int, cached_ok: bool = False) -> str:
     """The kernel a batch of ``lanes`` lanes per block runs: ``kernel`` (default:
     ``$ABB_GYM_KERNEL``, else "auto").  "specialised" is compiled for the scene's ball count
     and effects (once per pair, 20-60 s; it vectorises across lanes and runs fastest),
     "generic" is compiled once for every scene; "auto" picks the specialised kernel from
-    ``VECTORISE_FROM`` lanes per block on, where its compilation pays off."""
+    ``VECTORISE_FROM`` lanes per block on, where its compilation pays off.
+
+    With ``cached_ok``, "auto" below ``VECTORISE_FROM`` lanes gives "cached": the specialised
+    kernel if it is already compiled (this process or numba's on-disk cache, e.g. the wheel's
+    kernels of the default scene), else the general one (:meth:`Specialised.cached_entry`).
+    One lane of a specialised kernel is 2x the general kernel's speed, but compiling it would
+    cost more than a short run gains."""
     if kernel is not None and not isinstance(kernel, str):
         raise ValueError(f"kernel must be None or one of {KERNELS} (got {kernel!r:.80})")
     # only None means the default: an empty name is refused like any unknown one (an empty
@@ -45,7 +51,8 @@ def resolve_kernel(kernel: str | None, lanes: int) -> str:
         where = "" if passed else "; from $ABB_GYM_KERNEL"
         raise ValueError(f"kernel must be one of {KERNELS} (got {kernel!r:.80}{where})")
     if kernel == "auto":
-        kernel = "specialised" if lanes >= VECTORISE_FROM else "generic"
+        kernel = ("specialised" if lanes >= VECTORISE_FROM else
+                  "cached" if cached_ok else "generic")
     return kernel
 
 NOTICE_AFTER = 1.0  # [s] a compilation that takes longer than this is announced
@@ -79,6 +86,11 @@ def compile_notice(what: str, after: float = NOTICE_AFTER):
             sys.stderr.flush()
 
 
+def _layout(flags) -> str:
+    """numba's layout letter of an array (numba.np.numpy_support.map_layout)."""
+    return "C" if flags.c_contiguous else "F" if flags.f_contiguous else "A"
+
+
 class Specialised:
     """Call ``dispatcher`` (an ``njit`` function) with the arguments at ``literal`` positions
     compiled in as constants.
@@ -101,8 +113,10 @@ class Specialised:
         # the literal values plus what numba's type of each argument depends on: an entry point
         # trusts its argument types (a non-contiguous array passed to a contiguous signature
         # would be read as contiguous), so every type gets its own entry
+        # (the layout as numba reads it: C when C-contiguous, so a one-row array, which is
+        # both, shares the entry of a many-row one)
         return tuple(int(args[i]) for i in self.literal) + tuple(
-            (a.dtype.char, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous, a.flags.writeable)
+            (a.dtype.char, a.ndim, _layout(a.flags), a.flags.writeable)
             if isinstance(a, np.ndarray) else type(a) for a in args)
 
     def entry(self, *args, generic: bool = False):
@@ -112,8 +126,7 @@ class Specialised:
         key = self._key(args) + (generic,)
         fn = self._entries.get(key)
         if fn is None:
-            sig = tuple(typeof(a) if generic or i not in self.literal else types.literal(int(a))
-                        for i, a in enumerate(args))
+            sig = self._signature(args, generic)
             what = ("the general kernel" if generic else
                     "a kernel for " + ", ".join(f"{self.names.get(i, f'argument {i}')} = {args[i]}"
                                                 for i in self.literal))
@@ -121,6 +134,26 @@ class Specialised:
                 fn = self.dispatcher.compile(sig)
             self._entries[key] = fn
         return fn
+
+    def _signature(self, args, generic: bool) -> tuple:
+        return tuple(typeof(a) if generic or i not in self.literal else types.literal(int(a))
+                     for i, a in enumerate(args))
+
+    def cached_entry(self, *args):
+        """The specialised entry point for these arguments if it needs no compiling (loaded
+        already, or in numba's on-disk cache), else None.  The cache is asked through numba's
+        dispatcher cache (``_cache.load_overload``, numba's own first step in ``compile``);
+        if that interface is missing, nothing counts as cached."""
+        fn = self._entries.get(self._key(args) + (False,))
+        if fn is not None:
+            return fn
+        cache = getattr(self.dispatcher, "_cache", None)
+        try:
+            hit = cache.load_overload(self._signature(args, False),
+                                      self.dispatcher.targetctx) is not None
+        except Exception:  # noqa: BLE001 - a numba without this interface: compile nothing
+            hit = False
+        return self.entry(*args) if hit else None
 
     def __call__(self, *args):
         fn = self._entries.get(self._key(args) + (False,))
