@@ -249,22 +249,30 @@ def test_vector_render_and_pickle():
 
 def test_failure_info_is_masked_to_the_rows_that_failed():
     """One sub-environment at full torque overspeeds while the other stays at rest: the
-    failure message and its ``_failure`` mask name that row only."""
-    env = gym.make_vec("abb_gym/RunUpTorque-v0", num_envs=2,
-                       vectorization_mode="vector_entry_point", scene="yoshida_odd",
-                       control_interval=0.05)
-    env.reset(seed=0)
-    actions = np.array([[1.0], [0.0]], dtype=np.float32)
-    for _ in range(200):
-        _, _, terminated, _, info = env.step(actions)
-        if "failure" in info:
-            break
-    else:
+    failure message and its ``_failure`` mask name that row only; also when the other row's
+    episode ends (time limit) in the same step, so the mask is not the done mask."""
+    def run(max_episode_steps=None):
+        env = gym.make_vec("abb_gym/RunUpTorque-v0", num_envs=2,
+                           vectorization_mode="vector_entry_point", scene="yoshida_odd",
+                           control_interval=0.05, max_episode_steps=max_episode_steps)
+        env.reset(seed=0)
+        actions = np.array([[1.0], [0.0]], dtype=np.float32)
+        for k in range(1, 201):
+            _, _, terminated, truncated, info = env.step(actions)
+            if "failure" in info:
+                env.close()
+                return k, terminated, truncated, info
         pytest.fail("full torque never overspeeded in 10 s")
+
+    k, terminated, truncated, info = run()
     assert info["_failure"].tolist() == [True, False]
     assert info["failure"][0].startswith("overspeed") and info["failure"][1] is None
     assert terminated.tolist() == [True, False]
-    env.close()
+    # the resting row reaches its step limit in the step in which the other one overspeeds
+    k_again, terminated, truncated, info = run(max_episode_steps=k)
+    assert k_again == k and truncated[1] and not terminated[1]
+    assert info["_failure"].tolist() == [True, False]
+    assert info["failure"][1] is None
 
 
 def test_auto_on_a_few_lanes_takes_the_specialised_kernel_when_it_needs_no_compiling():
