@@ -13,9 +13,10 @@ with the same seed follow the same trajectory bit for bit.
 ``kernel="auto"`` (default; or ``$ABB_GYM_KERNEL``) runs, from 16 sub-environments (blocks of
 8 lanes or more), a kernel specialised on the scene's ball count and effects, whose lanes the
 compiler turns into vector instructions; it is compiled once per such combination (about a
-minute, announced on stderr) and cached on disk.  Below that, and with ``kernel="generic"``,
-the general kernel runs (compiled once for every scene).  Both give the same numbers bit for
-bit.
+minute, announced on stderr) and cached on disk.  Below that "auto" runs the specialised
+kernel only if it needs no compiling (loaded already, or in the on-disk cache), and otherwise,
+as ``kernel="generic"`` always does, the general kernel (compiled once for every scene).  Both
+give the same numbers bit for bit.
 
 ## Seeding
 
@@ -144,7 +145,8 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
     @property
     def kernel(self) -> str:
         """The compiled step in use: "specialised" (specialised on the scene's ball count and
-        effects, vector instructions across sub-environments) or "generic"."""
+        effects, vector instructions across sub-environments) or "generic" (``kernel="auto"``
+        resolves to one of them when the environment is made)."""
         return self._bufs.kernel
 
     def episode(self, i: int):
