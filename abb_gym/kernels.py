@@ -12,7 +12,8 @@ bar, so that the caches hold:
 * the kernels specialised on the default scene (``yoshida_odd``) for the speed-profile and
   torque actions: vectorised for the vector environments of the training configurations, and
   on one lane for the single environment, which takes them whenever they need no compiling
-  (twice the general kernel's speed on one lane).
+  (1.2x the general kernel's steps per second on one lane: README, "The single environment
+  on the specialised kernel").
 
 The wheel ships these caches (``make wheel`` runs :func:`build` first), so a fresh install on
 a machine of the same CPU type starts without compiling; on another CPU, or for another
@@ -78,7 +79,7 @@ def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
         ("vector environment (general kernel)", _vector(speed, "generic", 4)),
         ("batch simulation (general kernel)", _batch),
         ("vector environment, yoshida_odd speed (vectorised)", _vector(speed, "specialised", 32)),
-        ("single environment, yoshida_odd speed and torque (specialised: 2x the general one)",
+        ("single environment, yoshida_odd speed and torque (specialised)",
          lambda: (_vector(speed, "specialised", 1)(), _vector(torque, "specialised", 1)())),
         ("vector environment, yoshida_odd torque (vectorised)",
          _vector(torque, "specialised", 32)),
