@@ -94,6 +94,7 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
         from abb_gym import resources
         assert "site-packages" in str(resources.shipped_folder("scenes")), resources.shipped_folder("scenes")
         out = {"scenes": abb_gym.list_scenes(), "agents": resources.names("agents"), "ids": [],
+               "kernels": {},
                "preset_baselines": sorted(str(p.relative_to(resources.shipped_folder("baselines").parent))
                                           for p in resources.shipped_folder("baselines").parent.glob("*/baselines/*.yaml"))}
         for env_id in abb_gym.envs.ENV_IDS:
@@ -101,6 +102,7 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
             env.reset(seed=0)
             env.step(env.action_space.sample())
             out["ids"].append(env_id)
+            out["kernels"][env_id] = env.unwrapped._bufs.kernel
         print(json.dumps(out))
     """)
     made = json.loads(_run([str(py), "-c", script], cwd=work, env=env).strip().splitlines()[-1])
@@ -108,6 +110,10 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     assert set(made["agents"]) == {p.name for p in (REPO / "agents" / "trained").iterdir()
                                    if (p / "model.zip").exists()}
     assert len(made["ids"]) == 3
+    # a fresh process finds the one-lane specialised kernels the wheel ships for the default
+    # scene's speed and torque actions in the on-disk cache (abb_gym.kernels); DwellProfile
+    # runs the speed action's kernel (the same effects; the action kind is a run-time value)
+    assert made["kernels"] == dict.fromkeys(made["ids"], "specialised"), made["kernels"]
     # baselines tuned on other presets (configs/<preset>/baselines: agents/evaluate.py's)
     assert made["preset_baselines"] == sorted(
         str(p.relative_to(REPO / "configs")) for p in (REPO / "configs").glob("*/baselines/*.yaml"))
