@@ -51,6 +51,10 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None,
                    help="run folder (default runs/<config>/s<seed>-<time>); with --seeds, the "
                         "parent of one s<seed> folder per seed")
+    p.add_argument("--init-from", default=None, metavar="FOLDER",
+                   help="start from the best model (and statistics) of this agent folder, "
+                        "e.g. an earlier run (the config's _abb_gym init_from; see "
+                        "abb_gym.rl.warm_start)")
     p.add_argument("--tensorboard-log", "-tb", default=None, metavar="DIR",
                    help="write TensorBoard event files to DIR (SB3's tensorboard_log)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -84,6 +88,8 @@ def config_from_args(args: argparse.Namespace):
             changes[key] = getattr(args, key)
     if args.n_timesteps is not None:
         changes["n_timesteps"] = args.n_timesteps
+    if args.init_from is not None:
+        changes["init_from"] = {"folder": args.init_from, "model": "best"}
     # the environment's own keywords (scene, preset, ...) are welcome; make_vec's are not
     env_kw = check_env_kwargs(parse_assignments(args.env_kwargs, "--env-kwargs"),
                               "--env-kwargs", allowed=("scene", "preset", "record_history"))

@@ -34,6 +34,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       shaping: {observation: sync_amplitude, weight: 10.0}   # potential-based, training only
       curriculum: {fields: [critical_speed_scale], start: 0.2, full_at: 0.5}  # narrow first
       algo: sac                     # sac or tqc (policy MlpPolicy); default from the policy
+      init_from: {folder: runs/x, model: best}   # start from that run's weights (fine-tune)
 
 The keys, declared once on :class:`TrainConfig`:
 
@@ -130,9 +131,9 @@ ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
                 "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping",
-                "curriculum", "algo")
+                "curriculum", "algo", "init_from")
 #: of those, the ones only the ``_abb_gym`` section may hold
-SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo")
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo", "init_from")
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 #: keys rl_zoo3 consumes itself under the id (``ExperimentManager._preprocess_hyperparams``);
@@ -371,6 +372,11 @@ class TrainConfig:
     algo: str = declare("ppo", kind="choice", choices=tuple(ALGORITHMS),
                         doc="_abb_gym: the algorithm, rl_zoo3's --algo name (default: ppo, "
                             "ppo_lstm for a recurrent policy; sac or tqc only by this key)")
+    init_from: dict[str, Any] | None = declare(None, kind="any",
+                                               doc="_abb_gym: start from an agent folder's "
+                                                   "weights and statistics, {folder: PATH, "
+                                                   "model: best|final} "
+                                                   "(abb_gym.rl.warm_start; null: none)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
@@ -444,6 +450,9 @@ class TrainConfig:
             elif key == "shaping":
                 from .shaping import shaping_settings
                 v = shaping_settings(v, where, TrainConfigError)
+            elif key == "init_from":
+                from .warm_start import warm_start_settings
+                v = warm_start_settings(v, where, TrainConfigError)
             elif key == "tensorboard_log":
                 # SB3 would only fail when training starts, after the environments are built
                 if v is not None and (not isinstance(v, str) or not v):
@@ -496,6 +505,8 @@ class TrainConfig:
             out["shaping"] = copy.deepcopy(self.shaping)
         if self.curriculum is not None:
             out["curriculum"] = copy.deepcopy(self.curriculum)
+        if self.init_from is not None:
+            out["init_from"] = copy.deepcopy(self.init_from)
         if self.algo != algorithm_of(self.policy):
             out["algo"] = self.algo
         return out

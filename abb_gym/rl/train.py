@@ -353,6 +353,12 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
     venv = make_sb3_env(cfg.env_id, cfg.n_envs, cfg.env_kwargs,
                         bootstrap_truncated=cfg.bootstrap_truncated)
+    warm = None
+    if cfg.init_from is not None:  # checked before any training
+        from .warm_start import load_warm_start, warm_start_files
+        warm = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo,
+                                venv.unwrapped.setup.obs_names, cfg.normalize is not None,
+                                run_dir)
     env = VecMonitor(venv)  # logs the unshaped returns
     if cfg.shaping is not None:
         from .shaping import PotentialShaping, potential_index
@@ -377,6 +383,9 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     algorithm = algorithm_class(cfg.algo)
     model = algorithm(policy_class(cfg.policy), env, seed=int(seed), device="cpu",
                       verbose=verbose, **ppo_kw)
+    if warm is not None:
+        meta["init_from"] = load_warm_start(model, env, warm)
+        write_config(run_dir, cfg, meta)
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
                                   cfg.eval_episodes, cfg.eval_seed, meta,

@@ -1,0 +1,119 @@
+"""Start training from another run's model: fine-tuning, or training in stages.
+
+With ``_abb_gym: {init_from: {folder: runs/x, model: best}}`` (or ``abb-gym train
+--init-from runs/x``), training builds the network of its own config as always, then loads
+the weights (and the optimiser state) of the agent folder's ``best_model.zip`` or
+``model.zip`` into it (SB3's ``set_parameters``, exact match), and its observation
+statistics (``best_vecnormalize.pkl`` / ``vecnormalize.pkl``) into the training
+``VecNormalize``, which keeps updating them.  Everything else comes from the new config: the
+learning rate and its schedule, the clip range, the reward weights and the band of the
+training environment, the number of steps; the step counter starts at 0 again.  This is
+rl_zoo3's ``--trained-agent`` (``-i``), which also takes the hyperparameters of the new file.
+
+Why: to fine-tune a run at other settings (a lower learning rate, a narrower band, other
+reward weights) without training the first stage again, or to continue a run.  It is not a
+cure for an unstable training: on RunUpTorque, fine-tuning the best model of a run that
+settled 77 % of its evaluation machines lost it within 100-200k steps at every setting tried
+(``agents/README.md``, "What was tried").
+
+The folder is checked before any training (:func:`abb_gym.rl.agent_files.check_folder`: the
+fingerprints of its files), and must be an agent of the same environment id, algorithm and
+observation layout, with normalisation statistics exactly when the new config normalises.
+The run's ``config.yml`` records the folder, the model and its sha256 under
+``_run.init_from``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from ..configuration import build, declare
+
+__all__ = ["WarmStartSettings", "warm_start_settings", "warm_start_files", "load_warm_start"]
+
+MODELS = ("best", "final")
+
+
+@dataclass(frozen=True)
+class WarmStartSettings:
+    """Settings of the warm start (the ``_abb_gym.init_from`` mapping)."""
+
+    folder: str = declare(kind="text", doc="agent folder to start from (a run folder of "
+                                           "abb-gym train; relative: to the working folder)")
+    model: str = declare("best", kind="choice", choices=MODELS,
+                         doc="its best_model.zip (best test-set return) or model.zip (final)")
+
+
+def warm_start_settings(value: Any, where: str, error: type[ValueError]
+                        ) -> dict[str, Any] | None:
+    """The validated ``init_from`` mapping (None: none); a text is the folder; ``error``
+    names the field."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        value = {"folder": value}
+    if not isinstance(value, Mapping):
+        raise error(f"{where}: field 'init_from' must be a mapping {{folder: PATH, model: "
+                    f"best|final}}, a folder path or null (got {value!r})")
+    if "folder" not in value:
+        raise error(f"{where}: field 'init_from.folder' is missing (an agent folder, e.g. a "
+                    f"run folder of abb-gym train)")
+    settings = build(WarmStartSettings, dict(value), f"{where} init_from", error)
+    if not settings.folder:
+        raise error(f"{where}: field 'init_from.folder' must be a folder path (got '')")
+    return {"folder": str(settings.folder), "model": str(settings.model)}
+
+
+def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str,
+                     observation_names: Sequence[str], normalize: bool,
+                     run_dir: str | Path | None = None):
+    """The checked agent files to start from (:class:`~abb_gym.rl.agent_files.AgentFiles`);
+    :class:`~abb_gym.rl.agent_files.AgentError` naming the mismatch otherwise.  ``run_dir``:
+    the new run's folder, which must be another one (it would overwrite the files)."""
+    from .agent_files import AgentError, check_folder
+
+    folder = Path(settings["folder"])
+    if not folder.is_dir():
+        raise AgentError(f"init_from.folder {str(folder)!r} is not a folder (an agent folder "
+                         f"of abb-gym train: model.zip, config.yml, agent.yml)")
+    if run_dir is not None and folder.resolve() == Path(run_dir).resolve():
+        raise AgentError(f"init_from.folder {str(folder)!r} is the new run's own folder: "
+                         f"training would overwrite the model it starts from")
+    files = check_folder(folder, best=settings["model"] == "best")
+    where = f"init_from {str(folder)!r}"
+    if files.env_id != env_id:
+        raise AgentError(f"{where} is an agent of {files.env_id!r}, this config trains "
+                         f"{env_id!r}")
+    if files.algo != algo:
+        raise AgentError(f"{where} was trained by {files.algo!r}, this config by {algo!r}")
+    if files.observation_names != list(observation_names):
+        raise AgentError(f"{where} observes {files.observation_names}, this config's "
+                         f"environment {list(observation_names)} (the observation settings "
+                         f"must match)")
+    if (files.norm_path is not None) != bool(normalize):
+        have = "has" if files.norm_path is not None else "has no"
+        want = "normalises" if normalize else "does not normalise"
+        raise AgentError(f"{where} {have} observation statistics and this config {want} "
+                         f"observations: the network would see other inputs than it learnt on")
+    return files
+
+
+def load_warm_start(model: Any, env: Any, files: Any) -> dict[str, Any]:
+    """Load ``files`` (from :func:`warm_start_files`) into ``model`` and, if ``env`` is a
+    ``VecNormalize``, its statistics into ``env``; returns the ``_run.init_from`` record."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from .agent_files import AgentError, file_fingerprint, load_vecnormalize
+
+    try:
+        model.set_parameters(str(files.model_path), exact_match=True, device="cpu")
+    except Exception as exc:  # a network of another shape: torch's error names the tensors
+        raise AgentError(f"init_from: the network of {str(files.model_path)!r} does not match "
+                         f"this config's policy ({' '.join(str(exc).split())[:300]})") from None
+    if isinstance(env, VecNormalize) and files.norm_path is not None:
+        stats = load_vecnormalize(files.norm_path, env.observation_space.shape[0])
+        env.obs_rms = stats.obs_rms.copy()
+        env.ret_rms = stats.ret_rms.copy()
+    return {"folder": str(files.folder), "model": files.model_path.name,
+            "sha256": file_fingerprint(files.model_path)["sha256"]}
