@@ -230,6 +230,21 @@ def build(cls: Any, values: Mapping[str, Any], where: str,
     return cls(**kwargs)
 
 
+def build_section(cls: Any, value: Any, key: str, where: str, error: type[ValueError],
+                  shape: str, required: Mapping[str, str] = {}) -> Any:
+    """:func:`build` for the optional mapping field ``key`` of a config (None: None).
+    ``shape`` describes the mapping in the error for any other type; each ``required`` name
+    must be present, its text saying what it is."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping):
+        raise error(f"{where}: field '{key}' must be {shape} or null (got {value!r})")
+    for name, what in required.items():
+        if name not in value:
+            raise error(f"{where}: field '{key}.{name}' is missing ({what})")
+    return build(cls, dict(value), f"{where} {key}", error)
+
+
 # --------------------------------------------------------------------------- files
 def read_yaml(path: str | os.PathLike, what: str, error: type[ValueError] = ConfigError,
               mapping: bool = True) -> Any:

@@ -24,7 +24,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-from ..configuration import build, declare
+from ..configuration import build_section, declare
 
 __all__ = ["CURRICULUM_FIELDS", "CurriculumSettings", "curriculum_settings", "fraction",
            "narrowed", "CurriculumCallback"]
@@ -48,12 +48,10 @@ class CurriculumSettings:
 def curriculum_settings(value: Any, where: str, error: type[ValueError]
                         ) -> dict[str, Any] | None:
     """The validated ``curriculum`` mapping (None: none); ``error`` names the field."""
-    if value is None:
+    settings = build_section(CurriculumSettings, value, "curriculum", where, error,
+                             "a mapping {fields: [...], start: S, full_at: F}")
+    if settings is None:
         return None
-    if not isinstance(value, Mapping):
-        raise error(f"{where}: field 'curriculum' must be a mapping {{fields: [...], start: S, "
-                    f"full_at: F}} or null (got {value!r})")
-    settings = build(CurriculumSettings, dict(value), f"{where} curriculum", error)
     names = settings.fields
     if isinstance(names, str) or not isinstance(names, Sequence) or not names:
         raise error(f"{where}: field 'curriculum.fields' must be a non-empty list, some of "

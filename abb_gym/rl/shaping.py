@@ -30,11 +30,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from ..configuration import build, declare
+from ..configuration import build_section, declare
 
 __all__ = ["ShapingSettings", "shaping_settings", "PotentialShaping", "potential_index"]
 
@@ -55,15 +55,11 @@ class ShapingSettings:
 
 def shaping_settings(value: Any, where: str, error: type[ValueError]) -> dict[str, Any] | None:
     """The validated ``shaping`` mapping (None: no shaping); ``error`` names the field."""
-    if value is None:
+    settings = build_section(ShapingSettings, value, "shaping", where, error,
+                             "a mapping {observation: NAME, weight: W}",
+                             {"observation": "an observation entry, e.g. sync_amplitude"})
+    if settings is None:
         return None
-    if not isinstance(value, Mapping):
-        raise error(f"{where}: field 'shaping' must be a mapping {{observation: NAME, weight: "
-                    f"W}} or null (got {value!r})")
-    if "observation" not in value:
-        raise error(f"{where}: field 'shaping.observation' is missing (an observation entry, "
-                    f"e.g. sync_amplitude)")
-    settings = build(ShapingSettings, dict(value), f"{where} shaping", error)
     out = {"observation": settings.observation, "weight": float(settings.weight)}
     if settings.target is not None:
         out["target"] = float(settings.target)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ..configuration import build, declare
+from ..configuration import build_section, declare
 
 __all__ = ["WarmStartSettings", "warm_start_settings", "warm_start_files", "load_warm_start"]
 
@@ -49,17 +49,13 @@ def warm_start_settings(value: Any, where: str, error: type[ValueError]
                         ) -> dict[str, Any] | None:
     """The validated ``init_from`` mapping (None: none); a text is the folder; ``error``
     names the field."""
-    if value is None:
-        return None
     if isinstance(value, str):
         value = {"folder": value}
-    if not isinstance(value, Mapping):
-        raise error(f"{where}: field 'init_from' must be a mapping {{folder: PATH, model: "
-                    f"best|final}}, a folder path or null (got {value!r})")
-    if "folder" not in value:
-        raise error(f"{where}: field 'init_from.folder' is missing (an agent folder, e.g. a "
-                    f"run folder of abb-gym train)")
-    settings = build(WarmStartSettings, dict(value), f"{where} init_from", error)
+    settings = build_section(WarmStartSettings, value, "init_from", where, error,
+                             "a mapping {folder: PATH, model: best|final}, a folder path",
+                             {"folder": "an agent folder, e.g. a run folder of abb-gym train"})
+    if settings is None:
+        return None
     if not settings.folder:
         raise error(f"{where}: field 'init_from.folder' must be a folder path (got '')")
     return {"folder": str(settings.folder), "model": str(settings.model)}
