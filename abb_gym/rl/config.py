@@ -107,10 +107,10 @@ from typing import Any, Mapping
 import gymnasium as gym
 
 from .. import resources
-from ..configuration import (ConfigError, check, declare, fields_table, locate,
-                             parse_python_literal, read_yaml, specs)
+from ..configuration import (ConfigError, build_section, check, declare, fields_table,
+                             locate, parse_python_literal, read_yaml, specs)
 
-__all__ = ["TrainConfig", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
+__all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
            "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
@@ -316,6 +316,37 @@ def _normalize(value: Any) -> dict[str, Any] | None:
     return dict(value)
 
 
+#: the models of an agent folder a warm start can begin with
+WARM_START_MODELS = ("best", "final")
+
+
+@dataclass(frozen=True)
+class WarmStartSettings:
+    """Settings of the warm start (the ``_abb_gym.init_from`` mapping; loaded by
+    :mod:`abb_gym.rl.warm_start`)."""
+
+    folder: str = declare(kind="text", doc="agent folder to start from (a run folder of "
+                                           "abb-gym train; relative: to the working folder)")
+    model: str = declare("best", kind="choice", choices=WARM_START_MODELS,
+                         doc="its best_model.zip (best test-set return) or model.zip (final)")
+
+
+def warm_start_settings(value: Any, where: str, error: type[ValueError]
+                        ) -> dict[str, Any] | None:
+    """The validated ``init_from`` mapping (None: none); a text is the folder; ``error``
+    names the field."""
+    if isinstance(value, str):
+        value = {"folder": value}
+    settings = build_section(WarmStartSettings, value, "init_from", where, error,
+                             "a mapping {folder: PATH, model: best|final}, a folder path",
+                             {"folder": "an agent folder, e.g. a run folder of abb-gym train"})
+    if settings is None:
+        return None
+    if not settings.folder:
+        raise error(f"{where}: field 'init_from.folder' must be a folder path (got '')")
+    return {"folder": str(settings.folder), "model": str(settings.model)}
+
+
 @dataclass
 class TrainConfig:
     """One validated training configuration (see the module docstring for every key)."""
@@ -451,7 +482,6 @@ class TrainConfig:
                 from .shaping import shaping_settings
                 v = shaping_settings(v, where, TrainConfigError)
             elif key == "init_from":
-                from .warm_start import warm_start_settings
                 v = warm_start_settings(v, where, TrainConfigError)
             elif key == "tensorboard_log":
                 # SB3 would only fail when training starts, after the environments are built

@@ -16,6 +16,7 @@ cure for an unstable training: on RunUpTorque, fine-tuning the best model of a r
 settled 77 % of its evaluation machines lost it within 100-200k steps at every setting tried
 (``agents/README.md``, "What was tried").
 
+The settings are read with the rest of the config (:class:`abb_gym.rl.config.WarmStartSettings`).
 The folder is checked before any training (:func:`abb_gym.rl.agent_files.check_folder`: the
 fingerprints of its files), and must be an agent of the same environment id, algorithm and
 observation layout, with normalisation statistics exactly when the new config normalises.
@@ -24,41 +25,10 @@ The run's ``config.yml`` records the folder, the model and its sha256 under
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ..configuration import build_section, declare
-
-__all__ = ["WarmStartSettings", "warm_start_settings", "warm_start_files", "load_warm_start"]
-
-MODELS = ("best", "final")
-
-
-@dataclass(frozen=True)
-class WarmStartSettings:
-    """Settings of the warm start (the ``_abb_gym.init_from`` mapping)."""
-
-    folder: str = declare(kind="text", doc="agent folder to start from (a run folder of "
-                                           "abb-gym train; relative: to the working folder)")
-    model: str = declare("best", kind="choice", choices=MODELS,
-                         doc="its best_model.zip (best test-set return) or model.zip (final)")
-
-
-def warm_start_settings(value: Any, where: str, error: type[ValueError]
-                        ) -> dict[str, Any] | None:
-    """The validated ``init_from`` mapping (None: none); a text is the folder; ``error``
-    names the field."""
-    if isinstance(value, str):
-        value = {"folder": value}
-    settings = build_section(WarmStartSettings, value, "init_from", where, error,
-                             "a mapping {folder: PATH, model: best|final}, a folder path",
-                             {"folder": "an agent folder, e.g. a run folder of abb-gym train"})
-    if settings is None:
-        return None
-    if not settings.folder:
-        raise error(f"{where}: field 'init_from.folder' must be a folder path (got '')")
-    return {"folder": str(settings.folder), "model": str(settings.model)}
+__all__ = ["warm_start_files", "load_warm_start"]
 
 
 def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str,
