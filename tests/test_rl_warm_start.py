@@ -4,6 +4,7 @@ before any training."""
 from __future__ import annotations
 
 import copy
+import pickle
 
 import numpy as np
 import pytest
@@ -90,7 +91,6 @@ def test_the_model_starts_with_its_parents_weights_and_statistics(parent, model)
     for key in want:
         np.testing.assert_array_equal(got[key].numpy(), want[key].numpy(), err_msg=key)
     with open(parent / f"{prefix}vecnormalize.pkl", "rb") as fh:
-        import pickle
         stats = pickle.load(fh)
     np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
     np.testing.assert_array_equal(env.obs_rms.var, stats.obs_rms.var)

@@ -110,7 +110,8 @@ from .. import resources
 from ..configuration import (ConfigError, build_section, check, declare, fields_table,
                              locate, parse_python_literal, read_yaml, specs)
 
-__all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_config", "config_path", "configs_dir", "POLICY_FIELDS",
+__all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_config",
+           "config_path", "configs_dir", "POLICY_FIELDS",
            "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",

@@ -70,16 +70,18 @@ def load_warm_start(model: Any, env: Any, files: Any) -> dict[str, Any]:
     ``VecNormalize``, its statistics into ``env``; returns the ``_run.init_from`` record."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from .agent_files import AgentError, file_fingerprint, load_vecnormalize
+    from .agent_files import AgentError, _one_line, load_vecnormalize
 
     try:
         model.set_parameters(str(files.model_path), exact_match=True, device="cpu")
     except Exception as exc:  # a network of another shape: torch's error names the tensors
         raise AgentError(f"init_from: the network of {str(files.model_path)!r} does not match "
-                         f"this config's policy ({' '.join(str(exc).split())[:300]})") from None
+                         f"this config's policy ({_one_line(exc)})") from None
     if isinstance(env, VecNormalize) and files.norm_path is not None:
         stats = load_vecnormalize(files.norm_path, env.observation_space.shape[0])
         env.obs_rms = stats.obs_rms.copy()
         env.ret_rms = stats.ret_rms.copy()
-    return {"folder": str(files.folder), "model": files.model_path.name,
-            "sha256": file_fingerprint(files.model_path)["sha256"]}
+    # check_folder has just matched the file against this fingerprint of its manifest
+    name = files.model_path.name
+    return {"folder": str(files.folder), "model": name,
+            "sha256": files.manifest["files"][name]["sha256"]}
