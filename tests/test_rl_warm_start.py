@@ -84,7 +84,7 @@ def test_the_model_starts_with_its_parents_weights_and_statistics(parent, model)
     want = PPO.load(parent / f"{prefix}model.zip", device="cpu").policy.state_dict()
     fresh = child.policy.state_dict()
     assert any(not np.array_equal(fresh[k].numpy(), want[k].numpy()) for k in want)
-    files = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup.obs_names, True)
+    files = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup, True)
     record = load_warm_start(child, env, files)
     got = child.policy.state_dict()
     assert set(got) == set(want)
@@ -120,7 +120,7 @@ def test_mismatched_parents_are_refused_before_training(parent, tmp_path, capsys
     def files(cfg, run_dir=None):
         venv = make_sb3_env(cfg.env_id, 1, cfg.env_kwargs)
         try:
-            return warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup.obs_names,
+            return warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup,
                                     cfg.normalize is not None, run_dir)
         finally:
             venv.close()
@@ -133,6 +133,20 @@ def test_mismatched_parents_are_refused_before_training(parent, tmp_path, capsys
         files(_config(parent, normalize=False))
     with pytest.raises(AgentError, match=r"observes .* this config's environment"):
         files(_config(parent, env_kwargs=dict(PARENT["env_kwargs"], frame_stack=2)))
+    # the policy-relevant preset fields, as an evaluation checks them, and the same interval
+    env_kwargs = PARENT["env_kwargs"]
+    with pytest.raises(AgentError, match=r"preset field 'control_interval' of the environment "
+                                         r"\(0\.01 s\) differs from the agent's \(0\.05 s\)"):
+        files(_config(parent, env_kwargs=dict(env_kwargs, control_interval=0.01)))
+    with pytest.raises(AgentError, match=r"preset field 'vibration_filter_time'"):
+        files(_config(parent, env_kwargs=dict(env_kwargs, vibration_filter_time=0.2)))
+    with pytest.raises(AgentError, match=r"preset field 'episode_length'"):
+        files(_config(parent, env_kwargs=dict(env_kwargs, episode_length=3.0)))
+    with pytest.raises(AgentError, match=r"preset field 'operating_speed'"):
+        files(_config(parent, env_kwargs=dict(env_kwargs, operating_speed=500.0)))
+    # what a fine-tune may change: the band and the reward
+    assert files(_config(parent, env_kwargs=dict(env_kwargs, at_speed_tolerance=0.005,
+                                                 reward={"residual": 3.0}))).env_id == SPEED
     with pytest.raises(AgentError, match=r"the new run's own folder"):
         files(_config(parent), run_dir=parent)
     with pytest.raises(AgentError, match=r"is not a folder"):

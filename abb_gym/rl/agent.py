@@ -37,13 +37,12 @@ agent's environments with them.
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .config import OBSERVATION_FIELDS, observation_kwargs
+from .config import observation_kwargs, policy_env_mismatch
 
 __all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
 
@@ -145,22 +144,9 @@ class PPOPolicy:
                                  f"{self.observation_names[k]!r} there")
         if setup is None or not self.policy_env:
             return 1
-        kind = self.policy_env.get("kind")
-        if kind is not None and kind != setup.kind:
-            raise ValueError(f"the agent was trained on {self.env_id} (action kind {kind!r}); "
-                             f"the environment's action kind is {setup.kind!r}")
-        conf = setup.config.to_dict()
-        for key in ("vibration_filter_time", "dwell") + OBSERVATION_FIELDS:
-            if key in self.policy_env and conf[key] != self.policy_env[key]:
-                raise ValueError(f"preset field {key!r} of the environment "
-                                 f"({conf[key]!r}) differs from the agent's "
-                                 f"({self.policy_env[key]!r})")
-        for key, have in (("operating_speed", setup.operating_speed),
-                          ("episode_length", setup.episode_length)):
-            want = self.policy_env.get(key)
-            if want is not None and not math.isclose(have, want, rel_tol=1e-9):
-                raise ValueError(f"preset field {key!r} of the environment ({have:g}) differs "
-                                 f"from the agent's ({want:g})")
+        problem = policy_env_mismatch(self.policy_env, setup)
+        if problem is not None:
+            raise ValueError(f"{problem}; the agent was trained on {self.env_id}")
         want_dt = self.policy_env.get("control_interval")
         if want_dt is None:
             return 1

@@ -99,6 +99,7 @@ from __future__ import annotations
 
 import copy
 import inspect
+import math
 import os
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -114,6 +115,7 @@ __all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_conf
            "config_path", "configs_dir", "POLICY_FIELDS",
            "OBSERVATION_FIELDS", "observation_kwargs",
            "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
+           "policy_env_mismatch",
            "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
            "zoo_problems", "TrainConfigError", "ALGORITHMS", "algorithm_of", "algorithm_class",
            "import_class", "section_algorithm"]
@@ -727,6 +729,30 @@ def policy_env_fields(native_env: Any) -> dict[str, Any]:
     out["scene"] = setup.scene.name
     out["kind"] = setup.kind
     return out
+
+
+def policy_env_mismatch(want: Mapping[str, Any], setup: Any) -> str | None:
+    """What differs between an agent's recorded policy-relevant settings ``want`` (its
+    ``_run.policy_env``) and an environment's resolved ``setup``, as a sentence naming the
+    field, or None.  The control interval is the caller's rule (an evaluation may hold each
+    action for an integer number of steps, a warm start may not), so it is not compared here.
+    Fields missing from ``want`` (agents of older versions) are not compared."""
+    kind = want.get("kind")
+    if kind is not None and kind != setup.kind:
+        return (f"the action kind of the environment ({setup.kind!r}) differs from the "
+                f"agent's ({kind!r})")
+    conf = setup.config.to_dict()
+    for key in ("vibration_filter_time", "dwell") + OBSERVATION_FIELDS:
+        if key in want and conf[key] != want[key]:
+            return (f"preset field {key!r} of the environment ({conf[key]!r}) differs from "
+                    f"the agent's ({want[key]!r})")
+    for key, have in (("operating_speed", setup.operating_speed),
+                      ("episode_length", setup.episode_length)):
+        value = want.get(key)
+        if value is not None and not math.isclose(have, value, rel_tol=1e-9):
+            return (f"preset field {key!r} of the environment ({have:g}) differs from the "
+                    f"agent's ({value:g})")
+    return None
 
 
 def make_native_env(env_id: str, n_envs: int, env_kwargs: Mapping[str, Any] | None = None):

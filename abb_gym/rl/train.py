@@ -356,9 +356,8 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     warm = None
     if cfg.init_from is not None:  # checked before any training
         from .warm_start import load_warm_start, warm_start_files
-        warm = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo,
-                                venv.unwrapped.setup.obs_names, cfg.normalize is not None,
-                                run_dir)
+        warm = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup,
+                                cfg.normalize is not None, run_dir)
     env = VecMonitor(venv)  # logs the unshaped returns
     if cfg.shaping is not None:
         from .shaping import PotentialShaping, potential_index

@@ -19,25 +19,29 @@ settled 77 % of its evaluation machines lost it within 100-200k steps at every s
 The settings are read with the rest of the config (:class:`abb_gym.rl.config.WarmStartSettings`).
 The folder is checked before any training (:func:`abb_gym.rl.agent_files.check_folder`: the
 fingerprints of its files), and must be an agent of the same environment id, algorithm and
-observation layout, with normalisation statistics exactly when the new config normalises.
+observation layout, trained at the same policy-relevant preset fields
+(:data:`abb_gym.rl.config.POLICY_FIELDS`: the same ones an evaluation checks, and the same
+control interval), with normalisation statistics exactly when the new config normalises.
 The run's ``config.yml`` records the folder, the model and its sha256 under
 ``_run.init_from``.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
 __all__ = ["warm_start_files", "load_warm_start"]
 
 
-def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str,
-                     observation_names: Sequence[str], normalize: bool,
-                     run_dir: str | Path | None = None):
+def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str, setup: Any,
+                     normalize: bool, run_dir: str | Path | None = None):
     """The checked agent files to start from (:class:`~abb_gym.rl.agent_files.AgentFiles`);
-    :class:`~abb_gym.rl.agent_files.AgentError` naming the mismatch otherwise.  ``run_dir``:
+    :class:`~abb_gym.rl.agent_files.AgentError` naming the mismatch otherwise.  ``setup``:
+    the resolved setup of the new run's environment (``env.unwrapped.setup``); ``run_dir``:
     the new run's folder, which must be another one (it would overwrite the files)."""
     from .agent_files import AgentError, check_folder
+    from .config import policy_env_mismatch
 
     folder = Path(settings["folder"])
     if not folder.is_dir():
@@ -53,10 +57,22 @@ def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str,
                          f"{env_id!r}")
     if files.algo != algo:
         raise AgentError(f"{where} was trained by {files.algo!r}, this config by {algo!r}")
-    if files.observation_names != list(observation_names):
+    if files.observation_names != list(setup.obs_names):
         raise AgentError(f"{where} observes {files.observation_names}, this config's "
-                         f"environment {list(observation_names)} (the observation settings "
+                         f"environment {list(setup.obs_names)} (the observation settings "
                          f"must match)")
+    # the same preset fields an evaluation checks, and the same decision interval: a network
+    # fine-tuned at another interval, speed or filter would start from actions that mean
+    # something else
+    parent_env = files.run["policy_env"]
+    problem = policy_env_mismatch(parent_env, setup)
+    interval = parent_env.get("control_interval")
+    if problem is None and interval is not None and not math.isclose(
+            interval, setup.control_interval, rel_tol=1e-9):
+        problem = (f"preset field 'control_interval' of the environment "
+                   f"({setup.control_interval:g} s) differs from the agent's ({interval:g} s)")
+    if problem is not None:
+        raise AgentError(f"{where}: {problem}")
     if (files.norm_path is not None) != bool(normalize):
         have = "has" if files.norm_path is not None else "has no"
         want = "normalises" if normalize else "does not normalise"
