@@ -5,6 +5,12 @@ rolling resistance at every right-hand side.  Calls into the C library block LLV
 vectoriser, so the compiled kernels evaluate them with the branch-free polynomials below
 (argument reduction plus the fdlibm minimax polynomials), which vectorise across environments
 and give the same result in every path (single environment, vector environment, ``simulate``).
+The power of two that scales the exponential is built from its exponent bits (a bit
+reinterpretation, :func:`_bits` / :func:`_double`, which vectorises) rather than by ten
+comparisons, and the exponential's series is evaluated partly by Estrin's scheme: a shorter
+chain of dependent operations.  Together they cut one right-hand side of ``yoshida_odd`` (two
+tanh per call) from 41 to 33 ns per lane at 64 lanes, at the same measured accuracy
+(``python -m abb_gym.benchmarks.rhs_cost``).
 
 Accuracy against the C library (``tests/test_elementary.py`` measures it):
 
@@ -33,6 +39,10 @@ from __future__ import annotations
 
 import llvmlite.binding as _llvm
 import numpy as np
+from llvmlite import ir as _ir
+from numba.core import types
+from numba.extending import intrinsic
+
 from .._numba import njit
 
 _llvm.set_option("abb_gym", "-unroll-threshold=2000")
@@ -64,6 +74,9 @@ _C6 = -1.13596475577881948265e-11
 _LN2_HI = 6.93147180369123816490e-01
 _LN2_LO = 1.90821492927058770002e-10
 _INV_LN2 = 1.44269504088896338700e+00
+# 1.5 2^52: x + this rounds x to a whole number and leaves it in the low mantissa bits
+_ROUND_SHIFT = 6755399441055744.0
+_ROUND_SHIFT_BITS = 0x4338000000000000
 
 
 @njit(cache=True, inline="always")
@@ -95,47 +108,53 @@ def sincos(x):
     return sin_x, cos_x
 
 
+@intrinsic
+def _bits(typingctx, x):
+    """The IEEE bits of a double as an int64 (a reinterpretation, free in vector code)."""
+    if not (isinstance(x, types.Float) and x.bitwidth == 64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], _ir.IntType(64))
+    return types.int64(x), codegen
+
+
+@intrinsic
+def _double(typingctx, i):
+    """The double whose IEEE bits are the int64 ``i`` (inverse of :func:`_bits`)."""
+    if not (isinstance(i, types.Integer) and i.bitwidth == 64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], _ir.DoubleType())
+    return types.float64(i), codegen
+
+
 @njit(cache=True, inline="always")
 def _pow2(n):
-    """2^n for a whole number n in [0, 1023] given as a float: a product of exact powers of
-    two chosen by comparisons (floating point only, so that the loop vectorises)."""
-    # written out: a loop over a tuple of constants lowers to a switch, which LLVM does not
-    # vectorise
-    s = 1.0
-    r = n
-    t = r >= 512.0
-    s, r = (s * 2.0 ** 512, r - 512.0) if t else (s, r)
-    t = r >= 256.0
-    s, r = (s * 2.0 ** 256, r - 256.0) if t else (s, r)
-    t = r >= 128.0
-    s, r = (s * 2.0 ** 128, r - 128.0) if t else (s, r)
-    t = r >= 64.0
-    s, r = (s * 2.0 ** 64, r - 64.0) if t else (s, r)
-    t = r >= 32.0
-    s, r = (s * 2.0 ** 32, r - 32.0) if t else (s, r)
-    t = r >= 16.0
-    s, r = (s * 65536.0, r - 16.0) if t else (s, r)
-    t = r >= 8.0
-    s, r = (s * 256.0, r - 8.0) if t else (s, r)
-    t = r >= 4.0
-    s, r = (s * 16.0, r - 4.0) if t else (s, r)
-    t = r >= 2.0
-    s, r = (s * 4.0, r - 2.0) if t else (s, r)
-    return s * 2.0 if r >= 1.0 else s
+    """2^n, exactly, for a whole number n in [-1022, 1023] given as a float, built from its
+    exponent bits with vector integer operations only (AVX2 has no conversion from double to
+    int64: adding 1.5 2^52 leaves n in the low bits of the sum instead)."""
+    k = _bits(n + _ROUND_SHIFT) - _ROUND_SHIFT_BITS
+    return _double((k + 1023) << 52)
 
 
 @njit(cache=True, inline="always")
 def _expm1_reduced(y):
-    """(2^n, e^r - 1) with y = n ln 2 + r, |r| <= ln 2 / 2: e^y - 1 = 2^n (e^r - 1) + 2^n - 1
-    (the 2^n of a negative n as 1 / 2^-n)."""
+    """(2^n, e^r - 1) with y = n ln 2 + r, |r| <= ln 2 / 2: e^y - 1 = 2^n (e^r - 1) + 2^n - 1."""
     n = np.floor(y * _INV_LN2 + 0.5)
     r = (y - n * _LN2_HI) - n * _LN2_LO
-    # Taylor series of e^r - 1: truncation below 2e-17 relative on |r| <= 0.347
-    p = r * (1.0 + r * (1.0 / 2 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120 + r * (
-        1.0 / 720 + r * (1.0 / 5040 + r * (1.0 / 40320 + r * (1.0 / 362880 + r * (
-            1.0 / 3628800 + r * (1.0 / 39916800 + r / 479001600)))))))))))
-    scale = _pow2(abs(n))
-    return (scale if n >= 0.0 else 1.0 / scale), p
+    # Taylor series of e^r - 1 = r (1 + r/2! + ... + r^11/12!), truncation below 2e-17
+    # relative on |r| <= 0.347.  The leading terms by Horner's rule (their roundings decide
+    # the result's), the tail from r^4/5! by Estrin's scheme: its rounding is 1e-3 of the
+    # result's, and the lane loops wait on a chain of 14 dependent operations instead of 22
+    r2 = r * r
+    r4 = r2 * r2
+    tail = (((1.0 / 24 + r * (1.0 / 120)) + r2 * (1.0 / 720 + r * (1.0 / 5040)))
+            + r4 * ((1.0 / 40320 + r * (1.0 / 362880)) + r2 * (1.0 / 3628800 + r * (
+                1.0 / 39916800)) + r4 * (1.0 / 479001600)))
+    p = r * (1.0 + r * (1.0 / 2 + r * (1.0 / 6 + r * tail)))
+    return _pow2(n), p
 
 
 @njit(cache=True, inline="always")
