@@ -84,6 +84,21 @@ def test_tanh_within_6_ulp_relative_everywhere(scale):
     assert np.all(np.abs(got) <= 1.0)
 
 
+@njit(cache=False)
+def _pow2_all(n):
+    out = np.empty_like(n)
+    for i in range(n.size):
+        out[i] = el._pow2(n[i])
+    return out
+
+
+def test_pow2_from_the_exponent_bits_is_exact_on_its_range():
+    """The power of two that scales exp and tanh, built from its exponent bits, is exactly
+    2^n for every whole n the exponential can need (normal doubles)."""
+    n = np.arange(-1022, 1024, dtype=np.float64)
+    np.testing.assert_array_equal(_pow2_all(n), np.ldexp(1.0, n.astype(np.int64)))
+
+
 # ------------------------------------------------------------------ no-alias kernels
 def _argument_attributes(fn, sig) -> str:
     """The LLVM ``define`` line of ``fn`` compiled for ``sig`` (its argument attributes)."""
