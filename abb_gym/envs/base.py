@@ -40,7 +40,7 @@ COMMON_DOC = textwrap.dedent(r"""
     | 1 | vibration_x | (x - x_rest) / A_v, housing displacement, fixed frame | [-c/A_v, c/A_v] |
     | 2 | vibration_y | (y - y_rest) / A_v | [-c/A_v, c/A_v] |
     | 3 | vibration_amplitude | filtered whirl radius / A_v | [0, c/A_v] |
-    | 4 | time_fraction | t / episode_length | [0, 1] |
+    | 4 | time_fraction | t / episode_length; left out with ``observe_time: false`` (every later index one lower) | [0, 1] |
     | 5 .. 4+A | last_action | the last action after clipping | [-1, 1] |
     | 5+A | sync_amplitude | synchronous (1x) vibration amplitude / A_v; only with ``sync_vibration.enabled`` | [0, c/A_v] |
     | 6+A, 7+A | sync_cos, sync_sin | its phase from the rotor's reference mark | [-1, 1] |

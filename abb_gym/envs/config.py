@@ -38,6 +38,12 @@ eccentricity is ``U0 / rotor mass``.  s in [0.7, 1.3] means M' in [0.59, 2.04] M
 is refused when a corner of the range leaves no rotor mass (s too large) or, under gravity,
 sags the rotor onto the housing clearance (s too small).
 
+**Time in the observation.**  ``observe_time: false`` leaves the time fraction out of the
+observation (every later entry moves up by one).  The episode's time limit still applies; a
+policy then cannot tie its action to the clock, which a run-up controller that must hold a
+speed should not do (the RunUpTorque agents learnt "late means behind" from it:
+``agents/README.md``).
+
 **Frame stack.**  ``frame_stack: k`` (> 1) returns the last k observations, oldest first,
 concatenated into one flat ``Box`` of ``k x obs_dim`` (a policy with memory that SB3's
 ``MlpPolicy`` takes as it is); at reset the first observation fills all k frames
@@ -189,6 +195,10 @@ class EnvConfig:
                                        doc="per-episode randomisation")
     sync_vibration: SyncVibration = declare(SyncVibration(), kind="any",
                                             doc="the synchronous vibration observation")
+    observe_time: bool = declare(True, kind="flag",
+                                 doc="observe the time fraction t / episode_length; false: "
+                                     "an observation without it (a policy that cannot act on "
+                                     "the clock)")
     frame_stack: int = declare(1, kind="integer", ge=1, le=64,
                                doc="observe the last k observations (module docstring); 1: "
                                    "the current one only")

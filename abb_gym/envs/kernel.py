@@ -69,11 +69,14 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace):
     obs[i, 1] = _clip(dx / vs, -vh, vh)
     obs[i, 2] = _clip(dy / vs, -vh, vh)
     obs[i, 3] = _clip(st[i, S_FILT] / vs, 0.0, vh)
-    obs[i, 4] = _clip(st[i, S_K] / cfg[C_NMAX], 0.0, 1.0)
+    c = 4
+    if cfg[C_OBS_TIME] != 0.0:
+        obs[i, 4] = _clip(st[i, S_K] / cfg[C_NMAX], 0.0, 1.0)
+        c = 5
     na = int(cfg[C_NACT])
     for a in range(na):
-        obs[i, 5 + a] = st[i, S_ACT + a]
-    c = 5 + na
+        obs[i, c + a] = st[i, S_ACT + a]
+    c += na
     if cfg[C_SYNC] != 0.0:
         # the synchronous vibration (abb_gym.physics.sensors): the tracking filter's output
         # plus the read-out noise of this control step

@@ -19,7 +19,9 @@ from ..physics.runup import N_ACC
 # the synchronous vibration observation (abb_gym.physics.sensors): on (1) or off (0), the
 # tracking filter's time constant [s], the read-out noise [m] (standard deviation per component)
 (C_SYNC, C_SYNC_LAG, C_SYNC_NOISE) = range(27, 30)
-N_CFG = 30
+# the time fraction in the observation: on (1) or off (0)
+C_OBS_TIME = 30
+N_CFG = 31
 # ---------------------------------------------------------------- st: per-environment state
 # S_ACC .. S_ACC + runup.N_ACC - 1: the run-up metrics accumulator (abb_gym.physics.runup)
 (S_K, S_FILT, S_PEAK, S_DONE, S_TERM, S_TRUNC, S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX,

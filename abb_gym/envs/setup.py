@@ -31,11 +31,12 @@ from .config import EnvConfig, PresetError, load_preset
 from . import kernel
 from .kernel import N_G_ENV, observe_rows
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT, C_KIND,
-                     C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OVERSPEED, C_SETTLE, C_SPEED_HI,
-                     C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM, C_TREF,
-                     C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP, C_WR, C_WT, C_WV, FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG,
-                     N_OUT, N_ST, O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T,
-                     T_VIB, T_VIBMAX, T_W, T_X, T_Y)
+                     C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OBS_TIME, C_OVERSPEED, C_SETTLE,
+                     C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM,
+                     C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP, C_WR, C_WT, C_WV,
+                     FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG, N_OUT, N_ST,
+                     O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T, T_VIB,
+                     T_VIBMAX, T_W, T_X, T_Y)
 
 __all__ = ["EnvSetup", "Buffers", "SetupAccess", "check_seed", "check_flag", "draw_safely",
            "MEMORY_LIMIT",
@@ -312,15 +313,22 @@ class EnvSetup:
         self.sync = cfg.sync_vibration.enabled
         self.frame_stack = int(cfg.frame_stack)
         # one frame: the kernel's observation row
-        self.frame_dim = (5 + self.n_actions + (3 if self.sync else 0)
-                          + (2 * nb if self.observe_balls else 0))
+        self.observe_time = bool(cfg.observe_time)
+        self.frame_dim = ((5 if self.observe_time else 4) + self.n_actions
+                          + (3 if self.sync else 0) + (2 * nb if self.observe_balls else 0))
         self.obs_dim = self.frame_stack * self.frame_dim
         speed_lo, speed_hi = am.speed_bounds(cfg)
         vb = self.vibration_bound
-        lo = [speed_lo, -vb, -vb, 0.0, 0.0] + [-1.0] * self.n_actions
-        hi = [speed_hi, vb, vb, vb, 1.0] + [1.0] * self.n_actions
-        names = (["rotor_speed", "vibration_x", "vibration_y", "vibration_amplitude",
-                  "time_fraction"] + [f"last_action[{a}]" for a in range(self.n_actions)])
+        lo = [speed_lo, -vb, -vb, 0.0]
+        hi = [speed_hi, vb, vb, vb]
+        names = ["rotor_speed", "vibration_x", "vibration_y", "vibration_amplitude"]
+        if self.observe_time:
+            lo.append(0.0)
+            hi.append(1.0)
+            names.append("time_fraction")
+        lo += [-1.0] * self.n_actions
+        hi += [1.0] * self.n_actions
+        names += [f"last_action[{a}]" for a in range(self.n_actions)]
         if self.sync:
             lo += [0.0, -1.0, -1.0]
             hi += [vb, 1.0, 1.0]
@@ -367,6 +375,7 @@ class EnvSetup:
         c[C_SYNC] = 1.0 if sync.enabled else 0.0
         c[C_SYNC_LAG] = sync.lag
         c[C_SYNC_NOISE] = sync.noise * self.vibration_scale  # [m]
+        c[C_OBS_TIME] = 1.0 if self.observe_time else 0.0
         self.cfg = c
         self._state_names = state_names(nb)
         # the compiled step's effect set: the nominal scene's (an episode only rescales the

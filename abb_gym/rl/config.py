@@ -121,7 +121,7 @@ __all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_conf
            "import_class", "section_algorithm"]
 
 #: preset fields that shape the observation (the environment must use the agent's values)
-OBSERVATION_FIELDS = ("sync_vibration", "frame_stack")
+OBSERVATION_FIELDS = ("sync_vibration", "frame_stack", "observe_time")
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
