@@ -39,10 +39,11 @@ is refused when a corner of the range leaves no rotor mass (s too large) or, und
 sags the rotor onto the housing clearance (s too small).
 
 **Time in the observation.**  ``observe_time: false`` leaves the time fraction out of the
-observation (every later entry moves up by one).  The episode's time limit still applies; a
-policy then cannot tie its action to the clock, which a run-up controller that must hold a
-speed should not do (the RunUpTorque agents learnt "late means behind" from it:
-``agents/README.md``).
+observation (every later entry moves up by one).  The episode's time limit still applies, so
+the observation is then not Markov near the end of an episode: a policy cannot tie its action
+to the clock (the clocked RunUpTorque agents learnt "late means behind" from it), but it
+cannot foresee the truncation penalty either (a clock-less RunUpTorque agent learnt to stay
+at rest: ``agents/README.md``).
 
 **Frame stack.**  ``frame_stack: k`` (> 1) returns the last k observations, oldest first,
 concatenated into one flat ``Box`` of ``k x obs_dim`` (a policy with memory that SB3's
