@@ -428,7 +428,8 @@ def _check_took_effect(native, kwargs, vector):
     setup = native.setup
     nb = setup.scene.ball_count
     obs_dim = setup.obs_dim
-    frame = (5 + setup.n_actions + (3 if setup.config.sync_vibration.enabled else 0)
+    frame = ((5 if setup.config.observe_time else 4) + setup.n_actions
+             + (3 if setup.config.sync_vibration.enabled else 0)
              + (2 * nb if kwargs.get("observe_balls") else 0))
     assert obs_dim == frame * setup.config.frame_stack
     assert native.info_level == kwargs.get("info_level", "lean")
