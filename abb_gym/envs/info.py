@@ -43,6 +43,9 @@ STEP_KEYS = {
 }
 
 
+_TERMS = tuple(zip(TERM_NAMES, TERM_COLUMNS))
+
+
 def _state_column(name: str, nq: int):
     return nq + 2 if name == "rotor_speed" else slice(3, nq)
 
@@ -50,14 +53,15 @@ def _state_column(name: str, nq: int):
 def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
     """The lean keys: ``reward_terms`` and, on a failure, ``failure``."""
     if out.ndim == 1:
-        info: dict[str, Any] = {"reward_terms": {name: float(out[col]) for name, col
-                                                 in zip(TERM_NAMES, TERM_COLUMNS)}}
-        code = out[O_FCODE]
+        # one row: one tolist() instead of six numpy scalar reads (the single
+        # environment's lean info 2.5 -> 1.8 us a step)
+        row = out.tolist()
+        info: dict[str, Any] = {"reward_terms": {name: row[col] for name, col in _TERMS}}
+        code = row[O_FCODE]
         if code:
             info["failure"] = setup.failure_message(int(code), out, st, s)
         return info
-    info = {"reward_terms": {name: out[:, col].copy() for name, col
-                             in zip(TERM_NAMES, TERM_COLUMNS)}}
+    info = {"reward_terms": {name: out[:, col].copy() for name, col in _TERMS}}
     code = out[:, O_FCODE]
     if code.any():
         msgs = np.full(code.shape[0], None, dtype=object)
