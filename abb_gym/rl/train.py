@@ -376,7 +376,6 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     }
     if tb_dir is not None:
         meta["tensorboard_log"] = _repo_relative(str(tb_dir))
-    write_config(run_dir, cfg, meta)
 
     from .networks import policy_class
     algorithm = algorithm_class(cfg.algo)
@@ -384,7 +383,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
                       verbose=verbose, **ppo_kw)
     if warm is not None:
         meta["init_from"] = load_warm_start(model, env, warm)
-        write_config(run_dir, cfg, meta)
+    write_config(run_dir, cfg, meta)
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
                                   cfg.eval_episodes, cfg.eval_seed, meta,
