@@ -219,3 +219,58 @@ def test_rotating_frame_equals_the_simulator_model():
             mine = f(0.0, np.concatenate([q, qd]))[5:]
             theirs = np.concatenate([[wdd.real, wdd.imag], qdd[3:] / (wn * wn)])
             assert np.allclose(mine, theirs, rtol=1e-9, atol=1e-9 * np.max(np.abs(mine)))
+
+
+def _quotient_spectrum(a: np.ndarray, b: np.ndarray, c) -> np.ndarray:
+    """Eigenvalues of A on R^N / (family tangent), built independently of the package: the
+    tangent from scipy's null_space, its complement from scipy's orth."""
+    from scipy.linalg import null_space, orth
+    n = len(b)
+    cons = np.vstack([-c.a * np.sin(b), c.a * np.cos(b)])
+    v = np.zeros((a.shape[0], 0))
+    null = null_space(cons)
+    if null.shape[1]:
+        v = np.zeros((a.shape[0], null.shape[1]))
+        v[2:2 + n] = null
+    w = orth(np.eye(a.shape[0]) - v @ v.T) if v.shape[1] else np.eye(a.shape[0])
+    return np.linalg.eigvals(w.T @ a @ w)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_family_spectra_stacked_equal_member_by_member(n):
+    """The family is linearised as one stack (family_stability, equilibria): every member's
+    Jacobian equals :func:`jacobian` at that member, and its quotient spectrum equals one
+    built independently (scipy's null_space/orth) to 1e-9 (eigenvalues of order 1-10: round-
+    off of two different orthonormal bases).  The stack also holds rows of another tangent
+    dimension (every ball on one line: rank 1), which are grouped apart."""
+    g = Groups(eta=0.6, n_balls=n, race_eccentricity=0.05)
+    c = rf.coefficients(g)
+    om = 2.0
+    members = rf.balanced_family(g, om, n_members=5)
+    assert len(members) >= 1
+    collinear = np.zeros((1, n))
+    collinear[0, 1::2] = np.pi
+    rows = np.vstack([members, collinear, members[:1]])
+    w = -c.ecc
+    stack = rf._jacobians(c, om, complex(w.real, w.imag), rows)
+    spectra = rf._member_spectra(c, stack, rows)
+    assert len(spectra) == len(rows)
+    for b, a, (reduced, structural) in zip(rows, stack, spectra):
+        q = np.concatenate([[w.real, w.imag], b])
+        assert np.array_equal(a, rf.jacobian(g, om, q))
+        expected = _quotient_spectrum(a, b, c)
+        assert len(reduced) == len(expected)
+        assert np.allclose(np.sort_complex(reduced), np.sort_complex(expected), atol=1e-9)
+        dim = a.shape[0] - len(reduced)
+        assert len(structural) == dim
+    # the collinear row has one more tangent direction than the generic members (n >= 2)
+    assert len(spectra[len(members)][0]) == len(spectra[0][0]) - 1
+    fs = rf.family_stability(g, om, n_members=5)
+    assert np.array_equal(fs.max_real, [np.max(s[0].real) for s in spectra[:len(members)]])
+
+
+def test_family_stability_empty_family():
+    """No balanced state (capacity below the imbalance): an empty family, nothing stable."""
+    g = Groups(eta=0.05, n_balls=3)
+    fs = rf.family_stability(g, 2.0)
+    assert not fs.exists and fs.max_real.shape == (0,) and not fs.union_stable

@@ -108,13 +108,16 @@ def coefficients(g: Groups) -> _Coef:
 
 
 def _mass_matrix(c: _Coef, b: np.ndarray) -> np.ndarray:
-    n = len(b)
-    mm = np.zeros((2 + n, 2 + n))
-    mm[0, 0] = mm[1, 1] = 1.0
+    """Mass matrix M(b) at ball angles ``b`` (n,), or a stack of them for ``b`` (k, n)."""
+    b = np.asarray(b, float)
+    n = b.shape[-1]
+    mm = np.zeros(b.shape[:-1] + (2 + n, 2 + n))
+    mm[..., 0, 0] = mm[..., 1, 1] = 1.0
     s, co = np.sin(b), np.cos(b)
-    mm[0, 2:] = mm[2:, 0] = -c.a * s
-    mm[1, 2:] = mm[2:, 1] = c.a * co
-    mm[2:, 2:] = np.diag(c.inertia)
+    mm[..., 0, 2:] = mm[..., 2:, 0] = -c.a * s
+    mm[..., 1, 2:] = mm[..., 2:, 1] = c.a * co
+    idx = np.arange(n)
+    mm[..., 2 + idx, 2 + idx] = c.inertia
     return mm
 
 
@@ -179,50 +182,44 @@ def jacobian(system: Groups | Scene, omega: float, q) -> np.ndarray:
     c = coefficients(g)
     om = _check_omega(omega)
     q = np.asarray(q, float)
-    n = g.n_balls
-    nq = 2 + n
+    nq = 2 + g.n_balls
     if q.shape != (nq,):
         raise ValueError(f"q must have 2 + n_balls = {nq} entries (got {q.shape})")
-    b = q[2:]
-    s, co = np.sin(b), np.cos(b)
-    p = complex(q[0], q[1]) + c.ecc
-    k = np.zeros((nq, nq))
-    cm = np.zeros((nq, nq))
-    z = complex(om * om - 1.0, -2 * c.zeta * om)
-    k[0, 0], k[1, 0] = z.real, z.imag
-    k[0, 1], k[1, 1] = -z.imag, z.real
-    k[0, 2:] = -c.a * om * om * s
-    k[1, 2:] = c.a * om * om * co
-    k[2:, 0] = -c.a * om * om * s
-    k[2:, 1] = c.a * om * om * co
-    k[2:, 2:] = np.diag(-c.a * om * om * np.real(np.exp(-1j * b) * p))
-    zd = complex(-2 * c.zeta, -2 * om)
-    cm[0, 0], cm[1, 0] = zd.real, zd.imag
-    cm[0, 1], cm[1, 1] = -zd.imag, zd.real
-    cm[0, 2:] = 2 * c.a * om * co
-    cm[1, 2:] = 2 * c.a * om * s
-    cm[2:, 0] = -2 * c.a * om * co
-    cm[2:, 1] = -2 * c.a * om * s
-    cm[2:, 2:] = np.diag(-c.beta)
-    minv = np.linalg.inv(_mass_matrix(c, b))
-    a = np.zeros((2 * nq, 2 * nq))
-    a[:nq, nq:] = np.eye(nq)
-    a[nq:, :nq] = minv @ k
-    a[nq:, nq:] = minv @ cm
-    return a
+    return _jacobians(c, om, complex(q[0], q[1]), q[None, 2:])[0]
 
 
-def _family_tangent(c: _Coef, b: np.ndarray) -> np.ndarray:
-    """Orthonormal basis (columns, in the 2(2+n) state) of the balanced family's tangent space."""
-    n = len(b)
+def _jacobians(c: _Coef, om: float, w: complex, b: np.ndarray) -> np.ndarray:
+    """:func:`jacobian` of the equilibria with rotor centre ``w`` and ball angles ``b`` (k, n):
+    a stack (k, 2 (2 + n), 2 (2 + n)), so that a family is linearised in one pass."""
+    k_members, n = b.shape
     nq = 2 + n
-    cons = np.vstack([-c.a * np.sin(b), c.a * np.cos(b)])   # d/db of sum a_i e^{i b_i}
-    _, sv, vt = np.linalg.svd(cons)
-    rank = int(np.sum(sv > 1e-12 * max(1.0, sv.max(initial=0.0))))
-    null = vt[rank:].T                                       # n x (n - rank)
-    basis = np.zeros((2 * nq, null.shape[1]))
-    basis[2:nq, :] = null
-    return basis
+    s, co = np.sin(b), np.cos(b)
+    p = w + c.ecc
+    aoo = c.a * om * om
+    k = np.zeros((k_members, nq, nq))
+    cm = np.zeros((k_members, nq, nq))
+    idx = 2 + np.arange(n)
+    z = complex(om * om - 1.0, -2 * c.zeta * om)
+    k[:, 0, 0], k[:, 1, 0] = z.real, z.imag
+    k[:, 0, 1], k[:, 1, 1] = -z.imag, z.real
+    k[:, 0, 2:] = k[:, 2:, 0] = -aoo * s
+    k[:, 1, 2:] = k[:, 2:, 1] = aoo * co
+    # Re(e^{-i b} p) = cos b Re p + sin b Im p
+    k[:, idx, idx] = -aoo * (co * p.real + s * p.imag)
+    zd = complex(-2 * c.zeta, -2 * om)
+    cm[:, 0, 0], cm[:, 1, 0] = zd.real, zd.imag
+    cm[:, 0, 1], cm[:, 1, 1] = -zd.imag, zd.real
+    cm[:, 0, 2:] = 2 * c.a * om * co
+    cm[:, 1, 2:] = 2 * c.a * om * s
+    cm[:, 2:, 0] = -2 * c.a * om * co
+    cm[:, 2:, 1] = -2 * c.a * om * s
+    cm[:, idx, idx] = -c.beta
+    minv = np.linalg.inv(_mass_matrix(c, b))
+    a = np.zeros((k_members, 2 * nq, 2 * nq))
+    a[:, :nq, nq:] = np.eye(nq)
+    a[:, nq:, :nq] = minv @ k
+    a[:, nq:, nq:] = minv @ cm
+    return a
 
 
 def eigenvalues(system: Groups | Scene, omega: float, q, *, balanced: bool | None = None
@@ -244,16 +241,56 @@ def eigenvalues(system: Groups | Scene, omega: float, q, *, balanced: bool | Non
         balanced = abs(complex(q[0], q[1]) + c.ecc) < 1e-9
     if not balanced:
         return np.linalg.eigvals(a), np.zeros(0, complex)
-    v = _family_tangent(c, q[2:])
-    if v.shape[1] == 0:
-        return np.linalg.eigvals(a), np.zeros(0, complex)
-    # orthonormal complement of span(V)
-    qfull, _ = np.linalg.qr(np.hstack([v, np.eye(a.shape[0])]))
-    w = qfull[:, v.shape[1]:a.shape[0]]
-    reduced = np.linalg.eigvals(w.T @ a @ w)
+    return _member_spectra(c, a[None], q[None, 2:])[0]
+
+
+def _member_spectra(c: _Coef, a: np.ndarray, b: np.ndarray
+                    ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(eigenvalues, structural eigenvalues) of :func:`eigenvalues` for members of the
+    balanced family with ball angles ``b`` (k, n) and Jacobians ``a`` (k, N, N), computed as
+    stacks (one LAPACK call per kind for the whole family).
+
+    The family's tangent space at a member is the null space V of ``[Re, Im]`` of
+    ``d/db sum a_i e^{i b_i}`` (from its SVD; its dimension n - rank is n - 2, or n - 1 where
+    every ball is on one line); W, the orthonormal complement of span(V), comes from the QR
+    factorisation of [V, I].  Members are grouped by that dimension."""
+    k_members, n = b.shape
+    size = a.shape[-1]
+    out: list = [None] * k_members
+    if k_members == 0:
+        return out
+    cons = np.stack([-c.a * np.sin(b), c.a * np.cos(b)], axis=1)   # (k, 2, n)
+    _, sv, vt = np.linalg.svd(cons)
+    scale = np.maximum(1.0, sv.max(axis=1, initial=0.0))
+    rank = np.sum(sv > 1e-12 * scale[:, None], axis=1)
     full = np.linalg.eigvals(a)
-    structural = full[np.argsort(np.abs(full))[:v.shape[1]]]
-    return reduced, structural
+    for r in np.unique(rank):
+        sel = np.flatnonzero(rank == r)
+        dim = n - int(r)
+        if dim == 0:
+            for i in sel:
+                out[i] = (full[i], np.zeros(0, complex))
+            continue
+        basis = np.zeros((len(sel), size, dim))
+        basis[:, 2:2 + n, :] = np.swapaxes(vt[sel, r:, :], 1, 2)
+        eye = np.broadcast_to(np.eye(size), (len(sel), size, size))
+        qfull, _ = np.linalg.qr(np.concatenate([basis, eye], axis=2))
+        w = qfull[:, :, dim:size]
+        reduced = np.linalg.eigvals(np.swapaxes(w, 1, 2) @ a[sel] @ w)
+        nearest = np.argsort(np.abs(full[sel]), axis=1)[:, :dim]
+        structural = np.take_along_axis(full[sel], nearest, axis=1)
+        for j, i in enumerate(sel):
+            out[i] = (reduced[j], structural[j])
+    return out
+
+
+def _family_spectra(c: _Coef, om: float, members: np.ndarray
+                    ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`eigenvalues` of every member (rows of ball angles) of the balanced family."""
+    if len(members) == 0:
+        return []
+    w = -c.ecc
+    return _member_spectra(c, _jacobians(c, om, complex(w.real, w.imag), members), members)
 
 
 # ---------------------------------------------------------------------------- equilibria
@@ -539,14 +576,9 @@ def family_stability(system: Groups | Scene, omega: float, n_members: int = 13,
     c = coefficients(g)
     om = _check_omega(omega)
     mem = balanced_family(g, om, n_members)
-    w = -c.ecc
-    mr = np.empty(len(mem))
-    st = np.empty(len(mem))
-    for k, b in enumerate(mem):
-        q = np.concatenate([[w.real, w.imag], b])
-        ev, structural = eigenvalues(g, om, q, balanced=True)
-        mr[k] = np.max(ev.real)
-        st[k] = np.max(np.abs(structural)) if len(structural) else 0.0
+    spectra = _family_spectra(c, om, mem)
+    mr = np.array([np.max(ev.real) for ev, _ in spectra], dtype=float)
+    st = np.array([np.max(np.abs(s)) if len(s) else 0.0 for _, s in spectra], dtype=float)
     return FamilyStability(omega=om, members=mem, max_real=mr, structural=st, tol=tol)
 
 
@@ -558,11 +590,10 @@ def equilibria(system: Groups | Scene, omega: float, n_members: int = 13,
     c = coefficients(g)
     om = _check_omega(omega)
     out = unbalanced_equilibria(g, om, tol=tol)
-    fam = family_stability(g, om, n_members, tol)
+    members = balanced_family(g, om, n_members)
     w = -c.ecc
-    for b in fam.members:
+    for b, (ev, structural) in zip(members, _family_spectra(c, om, members)):
         q = np.concatenate([[w.real, w.imag], b])
-        ev, structural = eigenvalues(g, om, q, balanced=True)
         out.append(Equilibrium(kind="balanced", q=q, radius=abs(w),
                                theta=math.atan2(w.imag, w.real) if abs(w) else 0.0,
                                eigenvalues=ev, stable=bool(np.max(ev.real) < -tol),
