@@ -621,3 +621,29 @@ def test_motor_drives_are_a_drive_or_an_error_naming_the_argument(yoshida, made)
                       ["max_steps", "t_end"])
     if tr is not None:
         _check_trajectory(tr, 0.02)
+
+
+def test_yaml_files_are_parsed_once_per_content_and_reread_when_changed(tmp_path, monkeypatch):
+    """read_yaml parses a text once (an evaluation reads the same files per chunk), but every
+    call reads and checks the file: a changed file gives its new content, a file turned bad
+    gives the error, and what a caller changes in its copy does not reach the next caller."""
+    import yaml
+
+    from abb_gym.configuration import ConfigError, read_yaml
+    calls = []
+    real = yaml.safe_load
+    monkeypatch.setattr(yaml, "safe_load", lambda text: calls.append(text) or real(text))
+    path = tmp_path / "x.yaml"
+    path.write_text("a: {b: 1}\nunique: 7f3c\n")
+    first = read_yaml(path, "test")
+    first["a"]["b"] = 99
+    second = read_yaml(path, "test")
+    assert second["a"]["b"] == 1 and len(calls) == 1
+    path.write_text("a: {b: 2}\nunique: 7f3c\n")   # same size: a new text all the same
+    assert read_yaml(path, "test")["a"]["b"] == 2 and len(calls) == 2
+    path.write_text("a: [1\n")
+    with pytest.raises(ConfigError, match="is not valid YAML"):
+        read_yaml(path, "test")
+    path.unlink()
+    with pytest.raises(ConfigError, match="does not exist"):
+        read_yaml(path, "test")
