@@ -169,10 +169,17 @@ class Buffers:
             self._step = self._stepper().cached_entry(*self.kernel_args())
             self.kernel = "generic" if self._step is None else "specialised"
 
-    def kernel_args(self) -> tuple:
-        """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``, in order."""
+    def step_arrays(self) -> tuple:
+        """The arrays of the compiled step, in the order of
+        :data:`abb_gym.envs.kernel.STEP_ARRAYS`."""
         return (self.order, self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs,
-                self.out, self.trace, self.active, *self.blocks.arrays(), self.n_balls, self.spec)
+                self.out, self.trace, self.active, *self.blocks.arrays())
+
+    def kernel_args(self) -> tuple:
+        """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``: the packed
+        :meth:`step_arrays` (rebuild them after replacing any of those arrays), the ball count
+        and the effect bits."""
+        return kernel.pack_step_arrays(*self.step_arrays()), self.n_balls, self.spec
 
     def step_function(self):
         """The compiled step's entry point, called with :meth:`kernel_args` (compiled or

@@ -116,9 +116,11 @@ class Specialised:
         # would be read as contiguous), so every type gets its own entry
         # (the layout as numba reads it: C when C-contiguous, so a one-row array, which is
         # both, shares the entry of a many-row one)
+        # (a StructRef proxy carries its numba type, which holds its arrays' types)
         return tuple(int(args[i]) for i in self.literal) + tuple(
             (a.dtype.char, a.ndim, _layout(a.flags), a.flags.writeable)
-            if isinstance(a, np.ndarray) else type(a) for a in args)
+            if isinstance(a, np.ndarray) else getattr(a, "_type", None) or type(a)
+            for a in args)
 
     def entry(self, *args, generic: bool = False):
         """The compiled entry point for these arguments (compiled or loaded on first use);
