@@ -24,10 +24,8 @@ from __future__ import annotations
 
 import math
 
-from numba import types
-from numba.experimental import structref
-
-from .._numba import njit, prange
+from .._numba import njit, prange, types
+from numba.experimental import structref  # noqa: E402  (after .._numba: the cache set-up)
 
 from ..physics.specialise import Specialised
 
