@@ -289,8 +289,7 @@ def _family_spectra(c: _Coef, om: float, members: np.ndarray
     """:func:`eigenvalues` of every member (rows of ball angles) of the balanced family."""
     if len(members) == 0:
         return []
-    w = -c.ecc
-    return _member_spectra(c, _jacobians(c, om, complex(w.real, w.imag), members), members)
+    return _member_spectra(c, _jacobians(c, om, -c.ecc, members), members)
 
 
 # ---------------------------------------------------------------------------- equilibria

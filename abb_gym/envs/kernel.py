@@ -410,26 +410,29 @@ structref.define_proxy(StepArrays, StepArraysType, list(STEP_ARRAYS))
 
 
 @njit(cache=True)
-def pack_step_arrays(order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
-                     bk, btmp, blam, bcoef, bwork, bf, bg, bact):
-    """:class:`StepArrays` of these arrays (compiled and cached: the proxy's own constructor
-    would compile on every start)."""
-    return StepArrays(order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb,
-                      bd, bk, btmp, blam, bcoef, bwork, bf, bg, bact)
+def pack_step_arrays(*arrays):
+    """:class:`StepArrays` of ``arrays``, given in the order of :data:`STEP_ARRAYS` (compiled
+    and cached: the proxy's own constructor would compile on every start)."""
+    return StepArrays(*arrays)
+
+
+@njit(cache=True, inline="always")
+def step_array_fields(a):
+    """The arrays of :class:`StepArrays` ``a`` as a tuple, in the order of :data:`STEP_ARRAYS`
+    (``tests/test_kernel_packing.py`` checks the order against the buffers')."""
+    return (a.order, a.act, a.s, a.p, a.b, a.d, a.st_rows, a.cfg, a.obs, a.out, a.trace,
+            a.active, a.bs, a.bp, a.bb, a.bd, a.bk, a.btmp, a.blam, a.bcoef, a.bwork, a.bf,
+            a.bg, a.bact)
 
 
 @njit(cache=True, error_model="numpy")
 def _step_serial_packed(a, nb, spec):
-    _step_serial(a.order, a.act, a.s, a.p, a.b, a.d, a.st_rows, a.cfg, a.obs, a.out, a.trace,
-                 a.active, a.bs, a.bp, a.bb, a.bd, a.bk, a.btmp, a.blam, a.bcoef, a.bwork, a.bf,
-                 a.bg, a.bact, nb, spec)
+    _step_serial(*step_array_fields(a), nb, spec)
 
 
 @njit(cache=True, error_model="numpy")
 def _step_parallel_packed(a, nb, spec):
-    _step_parallel(a.order, a.act, a.s, a.p, a.b, a.d, a.st_rows, a.cfg, a.obs, a.out, a.trace,
-                   a.active, a.bs, a.bp, a.bb, a.bd, a.bk, a.btmp, a.blam, a.bcoef, a.bwork,
-                   a.bf, a.bg, a.bact, nb, spec)
+    _step_parallel(*step_array_fields(a), nb, spec)
 
 
 step_serial = Specialised(_step_serial_packed, literal=(1, 2), names=("balls", "effects"))
