@@ -22,7 +22,8 @@ from contextlib import contextmanager
 import numpy as np
 from .._numba import typeof, types
 
-__all__ = ["Specialised", "compile_notice", "resolve_kernel", "KERNELS"]
+__all__ = ["Specialised", "compile_notice", "resolve_kernel", "start_parallel_runtime",
+           "KERNELS"]
 
 KERNELS = ("auto", "generic", "specialised")
 VECTORISE_FROM = 8  # lanes per block from which "auto" picks the vectorised kernel
@@ -92,6 +93,22 @@ def _layout(flags) -> str:
     return "C" if flags.c_contiguous else "F" if flags.f_contiguous else "A"
 
 
+def start_parallel_runtime() -> None:
+    """Start numba's threading layer (its public ``get_num_threads`` does so).
+
+    A compiled function that calls a ``parallel=True`` one links against the parallel
+    runtime's symbols (``allocate_sched``, ``do_scheduling_*``), which exist only once the
+    threading layer runs.  numba restarts it when it loads a cached function that carries its
+    reload hook, but numba 0.68 gives the caller that hook only when the parallel callee was
+    compiled, not loaded from the cache, in the process that compiled the caller.  A wrapper
+    compiled over a cached callee therefore loads, in the next fresh process, into "LLVM
+    ERROR: Symbol not found: allocate_sched" and the process aborts (it did: ``abb-gym
+    evaluate --scene spannan_cfrp`` after ``make setup``).  Starting the layer first costs
+    one thread pool, which the parallel kernel is about to start anyway."""
+    import numba
+    numba.get_num_threads()
+
+
 class Specialised:
     """Call ``dispatcher`` (an ``njit`` function) with the arguments at ``literal`` positions
     compiled in as constants.
@@ -100,10 +117,16 @@ class Specialised:
     arguments' types (dtype, dimensions, layout and writeability of arrays), so a call with
     new types compiles a new entry as numba's own dispatch would.  Hot loops that call with
     the same arrays every time can fetch the entry point once with :meth:`entry`.
+
+    ``parallel``: ``dispatcher`` is a serial function that calls a ``parallel=True`` one;
+    numba's threading layer is then started (:func:`start_parallel_runtime`) before any entry
+    point compiles or loads.
     """
 
-    def __init__(self, dispatcher, literal: Sequence[int], names: Sequence[str] = ()):
+    def __init__(self, dispatcher, literal: Sequence[int], names: Sequence[str] = (),
+                 parallel: bool = False):
         self.dispatcher = dispatcher
+        self.parallel = parallel
         self.literal = tuple(literal)
         self.names = dict(zip(self.literal, names))
         self._entries: dict[tuple, object] = {}
@@ -133,6 +156,8 @@ class Specialised:
             what = ("the general kernel" if generic else
                     "a kernel for " + ", ".join(f"{self.names.get(i, f'argument {i}')} = {args[i]}"
                                                 for i in self.literal))
+            if self.parallel:
+                start_parallel_runtime()
             with compile_notice(f"{self.__name__}: {what}"):
                 fn = self.dispatcher.compile(sig)
             self._entries[key] = fn
