@@ -191,17 +191,18 @@ def oracle_run(setting: AgentSetting, args) -> dict:
     from abb_gym.baselines.baseline_policy import tuned_parameters
     from abb_gym.baselines.oracle import oracle_matches, run_oracle
     path = Path(args.out) / "oracle" / f"{setting.scene}_{setting.preset}_seed{args.seed}.json"
+    start = tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)
     if path.is_file():
         run = json.loads(path.read_text())
         if oracle_matches(run, setting.scene, setting.preset, args.seed, args.episodes,
-                          args.oracle_budget, setting.env_kwargs):
+                          args.oracle_budget, setting.env_kwargs, start=start):
             print(f"oracle: reusing {path}", flush=True)
             return run
     print(f"oracle: tuning knots on each of {args.episodes} machines ({args.oracle_budget} "
           f"candidates each) -> {path}", flush=True)
     run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
                      args.oracle_budget, env_kwargs=setting.env_kwargs,
-                     start=tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP))
+                     start=start)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(run, indent=1, default=float))
     return run

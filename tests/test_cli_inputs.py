@@ -319,6 +319,19 @@ def test_tuning_work_that_cannot_fit_is_refused_before_the_search():
             "--popsize")
     assert run(["tune-baselines", "--dry-run", "--budget", "10", "--popsize", "10"])[0] == \
         "reached"
+    refused(["tune-baselines", "--dry-run", "--restarts", "101"], "--restarts")
+
+
+def test_tuning_from_the_tuned_parameters_needs_them():
+    """``--from-tuned`` on a scene given by path (no tuned file goes with it) names the
+    option and the family."""
+    from abb_gym import resources
+    scene = str(resources.find("scenes", "yoshida_odd"))
+    line = refused(["tune-baselines", "--dry-run", "--scene", scene, "--family", "ramp",
+                    "--from-tuned"], "--from-tuned")
+    assert "ramp" in line and "no baselines file" in line
+    assert run(["tune-baselines", "--dry-run", "--family", "ramp", "--from-tuned"])[0] == \
+        "reached"
 
 
 @pytest.mark.parametrize("key", ["num_envs", "vectorization_mode", "record_history", "scene",
@@ -469,6 +482,8 @@ COMMANDS = {
         "--env": (st.sampled_from(["abb_gym/RunUpSpeed-v0"]), ["x"], ()),
         "--budget": (_ints(1, 10), INTEGERS, ()),
         "--popsize": (_ints(2, 6), INTEGERS, ()),
+        "--restarts": (_ints(0, 2), INTEGERS, ()),
+        "--from-tuned": (None, [], ()),
         "--episodes": (_ints(1, 4), INTEGERS, ()),
         "--seed": (_ints(0, 10), INTEGERS, ()),
         "--preset": (st.sampled_from(["train", "test"]), NAMES, ("preset",)),

@@ -168,6 +168,50 @@ def test_tuner_improves_on_the_default_and_sweep_points(tmp_path):
         assert key in data["policies"][0]["summary"] and key in data["policies"][0]["episodes"][0]
 
 
+def test_restart_populations_double_up_to_a_tenth_of_the_budget():
+    # cma's default for 7 parameters (knots) is 4 + int(3 ln 7) = 9
+    assert tuner.restart_popsizes(7, None, 240, 3) == [9, 18, 24, 24]
+    assert tuner.restart_popsizes(7, 5, 1000, 2) == [5, 10, 20]
+    assert tuner.restart_popsizes(1, None, 12, 1) == [4, 4]  # the cap never cuts the first
+
+
+def test_restarts_keep_the_first_search_and_the_best_of_all():
+    """Restarts add searches from random points: the first search is the one a tuning without
+    restarts runs (same seed, same candidates), every search is reported, and the result is
+    the best of them, on the same seeded episodes."""
+    kw = dict(families=("speed_dwell",), budget=6, episodes=2, popsize=3, progress=False,
+              seed=11)
+    alone = tuner.tune("yoshida_odd", **kw)["families"]["speed_dwell"]
+    both = tuner.tune("yoshida_odd", restarts=2, **kw)["families"]["speed_dwell"]
+    assert "searches" not in alone
+    runs = both["searches"]
+    assert [r["start"] for r in runs] == ["centre", "random", "random"]
+    assert runs[0]["best_return"] == alone["mean_return"]
+    assert both["mean_return"] == max(r["best_return"] for r in runs)
+    assert both["candidates"] == sum(r["candidates"] for r in runs) <= 18
+    again = tuner.evaluate_candidates("yoshida_odd", "speed_dwell", [both["params"]], 2, 11,
+                                      "train")[0]
+    assert again["return"] == pytest.approx(both["mean_return"], abs=1e-5)  # rounded to 5
+
+
+def test_a_tuning_from_given_parameters_is_never_worse_than_them():
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    start = tuned_parameters("yoshida_odd", "knots")
+    r = tuner.tune("yoshida_odd", families=("knots",), budget=4, episodes=2, seed=3,
+                   progress=False, start={"knots": start})
+    entry = r["families"]["knots"]
+    ref = tuner.evaluate_candidates("yoshida_odd", "knots", [start], 2, 3, "train")[0]
+    assert entry["mean_return"] >= round(ref["return"], 5)
+    assert entry["searches"][0]["start"] == "tuned" and "refines" in r["optimiser"]
+    with pytest.raises(ValueError, match="start names 'ramp'"):
+        tuner.tune("yoshida_odd", families=("knots",), budget=2, episodes=1, progress=False,
+                   start={"ramp": {}})
+    for bad in (-1, 101, True, 1.5):
+        with pytest.raises(ValueError, match="restarts must be an integer from 0 to 100"):
+            tuner.tune("yoshida_odd", families=("ramp",), budget=2, episodes=1,
+                       progress=False, restarts=bad)
+
+
 def test_a_failure_is_never_counted_as_a_success(tmp_path, monkeypatch):
     """The first wave's speed_reduction never finished an episode yet sat on the Pareto
     front: a run-up that never completes has at_speed False, its run-up time is the episode
@@ -312,6 +356,13 @@ def test_oracle_is_an_evaluation_result_of_the_same_machines():
     assert not oracle_matches(run, "yoshida_odd", "test", 5, 3, 4, reward)      # budget
     assert not oracle_matches(run, "yoshida_odd", "varied_test", 5, 3, 3, reward)
     assert not oracle_matches({"scene": "yoshida_odd"}, "yoshida_odd", "test", 5, 3, 3, reward)
+    # a warm start that changed (a re-tuned baseline) makes the stored run stale
+    started = dict(run, start=json.loads(json.dumps({"knot_speeds": (200.0, 210.0)})))
+    assert oracle_matches(started, "yoshida_odd", "test", 5, 3, 3, reward,
+                          start={"knot_speeds": (200.0, 210.0)})
+    assert not oracle_matches(started, "yoshida_odd", "test", 5, 3, 3, reward,
+                              start={"knot_speeds": (200.0, 211.0)})
+    assert not oracle_matches(started, "yoshida_odd", "test", 5, 3, 3, reward)
     table = family_table({"open loop": knots, "oracle": oracle}).splitlines()
     assert table[0].split("|")[2].strip() == "open loop"
     assert "oracle:knots per machine" in table[2]

@@ -47,16 +47,26 @@ def run_oracle(scene: str, preset: str, episodes: int = 100, seed: int = 0, budg
 
 def oracle_matches(run: dict[str, Any], scene: str, preset: str, seed: int, episodes: int,
                    budget: int, env_kwargs: dict[str, Any] | None = None,
-                   family: str = "knots") -> bool:
+                   family: str = "knots", start: dict[str, Any] | None = None) -> bool:
     """True if the stored ``run`` covers these machines (the first ``episodes`` of the same
-    seeded test set) with the same reward, family and budget."""
+    seeded test set) with the same reward, family, budget and warm start (a re-tuned baseline
+    is a new start: the oracle must again be at least the baseline on every machine)."""
     try:
         return (run["scene"] == scene and run["preset"] == preset and run["seed"] == seed
                 and run["family"] == family and run["budget"] == budget
                 and run["env_kwargs"] == (env_kwargs or {})
+                and _same_params(run.get("start"), start)
                 and len(run["machines"]) >= episodes)
     except (KeyError, TypeError):
         return False
+
+
+def _same_params(stored: dict[str, Any] | None, given: dict[str, Any] | None) -> bool:
+    """Parameters as stored in JSON (lists) against parameters as given (lists or tuples)."""
+    def plain(params):
+        return None if params is None else {
+            k: list(v) if isinstance(v, (list, tuple)) else v for k, v in params.items()}
+    return plain(stored) == plain(given)
 
 
 def oracle_result(run: dict[str, Any], episodes: int | None = None,

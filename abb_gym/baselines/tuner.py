@@ -35,6 +35,9 @@ from .families import FAMILY_NAMES, build_family, family_class
 
 ENV_ID = "abb_gym/RunUpSpeed-v0"
 OBJECTIVE = "mean return on the preset (the environment's reward)"
+# restart r of a tuning seeds its CMA-ES with seed + RUN_SEED_STRIDE * r: a prime, so that no
+# restart repeats the search of a tuning run with a nearby seed
+RUN_SEED_STRIDE = 7919
 
 
 def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
@@ -198,27 +201,37 @@ def _shrink_bar(bar, budget: int, used: int) -> None:
 
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
-                executor, bar, env_kwargs, start: dict | None = None
-                ) -> tuple[dict, dict, int]:
-    """CMA-ES over the unit box from its centre, or from ``start`` (parameters, also a
-    candidate, with a smaller initial step: a refinement)."""
+                executor, bar, env_kwargs, start: dict | None = None,
+                x0: np.ndarray | None = None, run: int = 0) -> tuple[dict, dict, int]:
+    """CMA-ES over the unit box from its centre; or from ``start`` (parameters, also a
+    candidate, with a smaller initial step: a refinement); or from ``x0`` (a point of the unit
+    box, itself the first candidate, with the full initial step: a restart).  ``run`` numbers
+    the searches of one tuning and seeds each one's CMA-ES differently.  Returns the best row,
+    the first candidate's row (the family's default, or the restart point) and how many
+    candidates ran."""
     import cma
 
     space = profiles.search_space(family_class(family))
-    first = [{}] if start is None else [{}, dict(start)]
+    if x0 is not None:
+        first = [params_from_unit(family, x0, scales)]
+    else:
+        first = [{}] if start is None else [{}, dict(start)]
     rows = _evaluate_candidates(scene_name, family, first, episodes, seed, preset,
                                 executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)
     default = rows[0]
     best = max(rows, key=lambda r: r["return"] if math.isfinite(r["return"]) else -math.inf)
     evaluations = len(rows)
-    x0, sigma0 = np.full(len(space), 0.5), 0.3
-    if start is not None:
+    sigma0 = 0.3
+    if x0 is None and start is None:
+        x0 = np.full(len(space), 0.5)
+    elif x0 is None:
         x0, sigma0 = unit_from_params(family, start, scales), 0.1
     if space and evaluations < budget:
         # maxstd: a step beyond half the unit box means nothing, and without a cap cma 4.x
         # fails on a flat objective ("not yet initialized (dimension needed)"), as when no
         # candidate of a family ever reaches the operating speed
-        opts = {"bounds": [0.0, 1.0], "seed": seed % (2 ** 31 - 1) + 1, "verbose": -9,
+        opts = {"bounds": [0.0, 1.0], "seed": (seed + RUN_SEED_STRIDE * run) % (2 ** 31 - 1) + 1,
+                "verbose": -9,
                 "maxfevals": max(budget - 1, 1), "maxstd": 0.5}
         if popsize:
             opts["popsize"] = popsize
@@ -243,15 +256,62 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
     return best, default, evaluations
 
 
+def restart_popsizes(dim: int, popsize: int | None, budget: int, restarts: int) -> list[int]:
+    """Populations of the first search and its ``restarts`` restarts in a space of ``dim``
+    parameters: IPOP-CMA-ES (Auger & Hansen 2005) doubles the population at each restart, so
+    that later searches see more of the landscape at once; here capped at ``budget // 10`` so
+    that every search of ``budget`` candidates still runs about ten generations.  The first is
+    ``popsize`` or cma's default, 4 + int(3 ln dim)."""
+    first = popsize or 4 + int(3 * math.log(dim))
+    cap = max(first, budget // 10)
+    return [first] + [min(first * 2 ** r, cap) for r in range(1, restarts + 1)]
+
+
+def _restarted_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
+                      popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
+                      executor, bar, env_kwargs, restarts: int = 0,
+                      start: dict | None = None) -> tuple[dict, dict, int, list[dict]]:
+    """The first search (from the centre, or refining ``start``), then ``restarts`` searches
+    from points drawn uniformly in the unit box (seeded by ``seed``), with the populations of
+    :func:`restart_popsizes`; each has ``budget`` candidates.  CMA-ES is a local method: a
+    restart elsewhere is what finds a better basin (the shipped spannan_cfrp ``knots`` was 0.5
+    in return short of a profile tuned for another weight, on its own objective).  Returns the
+    best row of all, the family default's row, the candidates run and one line per search."""
+    best, default, n = _cma_search(family, scene_name, scales, budget, popsize, episodes, seed,
+                                   preset, env_id, executor, bar, env_kwargs, start)
+    _shrink_bar(bar, budget, n)
+    dim = len(profiles.search_space(family_class(family)))
+    sizes = restart_popsizes(dim, popsize, budget, restarts) if dim else [0]
+    runs = [{"start": "centre" if start is None else "tuned", "popsize": sizes[0],
+             "candidates": n, "best_return": round(best["return"], 5)}]
+    points = np.random.default_rng([seed, 1]).uniform(0.0, 1.0, (len(sizes) - 1, dim))
+    for r, (size, x0) in enumerate(zip(sizes[1:], points), start=1):
+        found, _, m = _cma_search(family, scene_name, scales, budget, size, episodes, seed,
+                                  preset, env_id, executor, bar, env_kwargs, x0=x0, run=r)
+        _shrink_bar(bar, budget, m)
+        n += m
+        runs.append({"start": "random", "popsize": size, "candidates": m,
+                     "best_return": round(found["return"], 5)})
+        if found["return"] > best["return"]:
+            best = found
+    if not dim:  # nothing to restart: the bar's share of the restarts is not coming
+        _shrink_bar(bar, budget * restarts, 0)
+    return best, default, n, runs
+
+
 def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: int = 24,
          seed: int = 20_000, preset: str = "train", executor=None,
          out: str | Path | None = None, force: bool = False, popsize: int | None = None,
          env_id: str = ENV_ID, progress: bool = True,
-         env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Tune each family with CMA-ES (module docstring): ``budget`` candidates per family, each
+         env_kwargs: dict[str, Any] | None = None, restarts: int = 0,
+         start: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """Tune each family with CMA-ES (module docstring): ``budget`` candidates per search, each
     scored on ``episodes`` seeded episodes of ``preset`` (with ``env_kwargs``, e.g. the reward
-    weights an agent was trained with, so that both optimise the same return).  Returns the
-    result and, with ``out``, writes it there (:func:`write_tuned`)."""
+    weights an agent was trained with, so that both optimise the same return).  ``restarts``
+    more searches per family start from random points (:func:`_restarted_search`); ``start``
+    maps a family to parameters its first search refines (e.g. the shipped tuning, which is
+    then a candidate, so the result is never worse on these episodes).  Returns the result
+    and, with ``out``, writes it there (:func:`write_tuned`)."""
     import cma
 
     families = tuple(families)
@@ -262,6 +322,15 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
             popsize, (int, np.integer)) or popsize < 2):
         # CMA-ES ranks at least two candidates per generation
         raise ValueError(f"popsize must be an integer >= 2 (got {popsize!r})")
+    if isinstance(restarts, bool) or not isinstance(restarts, (int, np.integer)) \
+            or not 0 <= restarts <= 100:
+        raise ValueError(f"restarts must be an integer from 0 to 100 (got {restarts!r})")
+    start = dict(start or {})
+    for fam, params in start.items():
+        if fam not in families:
+            raise ValueError(f"start names {fam!r}, which is not tuned here (families: "
+                             f"{', '.join(families)})")
+        build_family(fam, **params)  # the declared fields validate it
     # before any candidate runs: every input a task will use (a bad one is one error), and
     # the file the result goes to
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
@@ -271,15 +340,15 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
     result: dict[str, Any] = {
         "scene": scene_name, "env": env_id, "preset": preset,
         "env_kwargs": dict(env_kwargs or {}), "episodes": episodes,
-        "seed": seed, "optimiser": f"CMA-ES (cma {cma.__version__}), {budget} candidates per "
-                                   f"family", "objective": OBJECTIVE, "families": {}}
-    with tqdm(total=budget * len(families), desc=f"tune {scene_name}", unit="candidate",
-              disable=not progress) as bar:
+        "seed": seed, "optimiser": _optimiser(cma.__version__, budget, restarts, start),
+        "objective": OBJECTIVE, "families": {}}
+    with tqdm(total=budget * (1 + restarts) * len(families), desc=f"tune {scene_name}",
+              unit="candidate", disable=not progress) as bar:
         for fam in families:
             bar.set_postfix_str(fam)
-            best, default, n = _cma_search(fam, scene_name, scales, budget, popsize, episodes,
-                                           seed, preset, env_id, executor, bar, env_kwargs)
-            _shrink_bar(bar, budget, n)
+            best, default, n, runs = _restarted_search(
+                fam, scene_name, scales, budget, popsize, episodes, seed, preset, env_id,
+                executor, bar, env_kwargs, restarts, start.get(fam))
             result["families"][fam] = {
                 "params": _rounded(best["params"]),
                 "mean_return": round(best["return"], 5),
@@ -289,9 +358,22 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
                 "at_speed": round(best["at_speed"], 4),
                 "candidates": n,
             }
+            if len(runs) > 1 or fam in start:
+                result["families"][fam]["searches"] = runs
     if out is not None:
         result["path"] = str(write_tuned(result, out, force=force))
     return result
+
+
+def _optimiser(version: str, budget: int, restarts: int, start: dict) -> str:
+    """The ``optimiser`` line of a tuning result."""
+    text = f"CMA-ES (cma {version}), {budget} candidates per family"
+    if restarts:
+        text = (f"CMA-ES (cma {version}), {budget} candidates per search, 1 + {restarts} "
+                f"searches per family (IPOP restarts from random points)")
+    if start:
+        text += f"; the first search refines the given parameters of {', '.join(start)}"
+    return text
 
 
 def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100,

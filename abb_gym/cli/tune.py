@@ -33,6 +33,12 @@ def register(sub) -> None:
                    help="candidates per family (CMA-ES evaluations)")
     p.add_argument("--popsize", type=int, default=None,
                    help="CMA-ES population (default: cma's 4 + 3 ln d)")
+    p.add_argument("--restarts", type=int, default=0,
+                   help="further CMA-ES searches per family, each from a random point with a "
+                        "doubled population (IPOP), each of --budget candidates")
+    p.add_argument("--from-tuned", action="store_true",
+                   help="the first search refines the tuned parameters that baseline:NAME "
+                        "uses now (so the result is never worse on these episodes)")
     p.add_argument("--episodes", type=int, default=24, help="training episodes per candidate")
     p.add_argument("--seed", type=int, default=20_000, help="seed of the episodes and of CMA-ES")
     p.add_argument("--preset", default="train", help="environment preset of the objective")
@@ -76,6 +82,8 @@ def run(args) -> int:
                          f"{args.popsize})")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0 (got {args.seed})")
+    if not 0 <= args.restarts <= 100:
+        raise ValueError(f"--restarts must be from 0 to 100 (got {args.restarts})")
     from ..baselines.tuner import check_tuned_path, tuned_path
     from ..configuration import parse_assignments
     from ..evaluation.evaluate import check_inputs
@@ -95,8 +103,23 @@ def run(args) -> int:
         target = tuned_path(out, args.scene)
         check_tuned_path(target, args.force)
         output_file(target, "--out")
-    result = tune(args.scene, tuple(args.family or FAMILIES), args.budget, args.episodes,
+    families = tuple(args.family or FAMILIES)
+    start = _tuned_starts(args.scene, families) if args.from_tuned else None
+    result = tune(args.scene, families, args.budget, args.episodes,
                   args.seed, args.preset, _executor(args), out=out, force=args.force,
-                  popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs)
+                  popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs,
+                  restarts=args.restarts, start=start)
     print(yaml.safe_dump(result, sort_keys=False))
     return 0
+
+
+def _tuned_starts(scene: str, families: tuple[str, ...]) -> dict:
+    """``--from-tuned``: each family's parameters as ``baseline:NAME`` finds them now."""
+    from ..baselines.baseline_policy import tuned_file, tuned_parameters
+    starts = {fam: tuned_parameters(scene, fam) for fam in families}
+    missing = [fam for fam, params in starts.items() if params is None]
+    if missing:
+        where = tuned_file(scene) or "no baselines file on the configuration path"
+        raise ValueError(f"--from-tuned: no tuned parameters of {', '.join(missing)} for "
+                         f"{scene} ({where})")
+    return starts
