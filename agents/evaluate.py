@@ -186,26 +186,39 @@ def configs_folder(folder: Path | None):
 
 
 def oracle_run(setting: AgentSetting, args) -> dict:
-    """The oracle of the agent's test machines: stored in ``<out>/oracle/`` if it matches,
-    else computed (minutes: a progress bar counts the candidates) and stored."""
-    from abb_gym.baselines.baseline_policy import tuned_parameters
-    from abb_gym.baselines.oracle import oracle_matches, run_oracle
+    """The oracle of the agent's test machines: machine by machine the best of the per-machine
+    searches from each start (the tuned knots, then the ``oracle_starts`` of its baselines
+    file; :func:`abb_gym.baselines.oracle.best_of_runs`).  Each start's run is reused from
+    ``<out>/oracle/`` if it matches, else computed (minutes: a progress bar counts the
+    candidates) and stored."""
+    from abb_gym.baselines.baseline_policy import oracle_starts, tuned_parameters
+    from abb_gym.baselines.oracle import best_of_runs, oracle_matches, run_oracle
     path = Path(args.out) / "oracle" / f"{setting.scene}_{setting.preset}_seed{args.seed}.json"
-    start = tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)
+    starts = ([tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)]
+              + oracle_starts(setting.scene, STRONGEST_OPEN_LOOP))
+    stored = []
     if path.is_file():
-        run = json.loads(path.read_text())
-        if oracle_matches(run, setting.scene, setting.preset, args.seed, args.episodes,
-                          args.oracle_budget, setting.env_kwargs, start=start):
-            print(f"oracle: reusing {path}", flush=True)
-            return run
-    print(f"oracle: tuning knots on each of {args.episodes} machines ({args.oracle_budget} "
-          f"candidates each) -> {path}", flush=True)
-    run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
-                     args.oracle_budget, env_kwargs=setting.env_kwargs,
-                     start=start)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(run, indent=1, default=float))
-    return run
+        data = json.loads(path.read_text())
+        stored = data["runs"] if "runs" in data else [data]
+    runs, computed = [], False
+    for k, start in enumerate(starts):
+        run = next((r for r in stored if oracle_matches(
+            r, setting.scene, setting.preset, args.seed, args.episodes, args.oracle_budget,
+            setting.env_kwargs, start=start)), None)
+        if run is not None:
+            print(f"oracle: reusing start {k + 1} of {len(starts)} from {path}", flush=True)
+        else:
+            print(f"oracle: tuning knots on each of {args.episodes} machines "
+                  f"({args.oracle_budget} candidates each, start {k + 1} of {len(starts)}) "
+                  f"-> {path}", flush=True)
+            run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
+                             args.oracle_budget, env_kwargs=setting.env_kwargs, start=start)
+            computed = True
+        runs.append(run)
+    if computed:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"runs": runs}, indent=1, default=float))
+    return best_of_runs(runs)
 
 
 def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args
@@ -229,8 +242,9 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
             f"{args.episodes} machines (seed {args.seed}), reward weights {reward or 'default'}"
             f", mean [95 % CI].  Best open loop and closed-loop hand design (the better return "
             f"of {', '.join(CLOSED_LOOP)}) tuned on {setting.train_preset}; the oracle tunes "
-            f"knots on each machine alone ({args.oracle_budget} candidates, from the tuned "
-            f"knots).  Agent: `{setting.folder.name}`.\n\n" + family_table(columns) + "\n\n")
+            f"knots on each machine alone ({args.oracle_budget} candidates from each start: the "
+            f"tuned knots and the earlier tunings its baselines file lists; the best per "
+            f"machine).  Agent: `{setting.folder.name}`.\n\n" + family_table(columns) + "\n\n")
     for name, gap in gaps.items():
         text += f"- {name}: " + ", ".join(
             f"{k} {_cell(v)}" for k, v in gap.items()

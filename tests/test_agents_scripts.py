@@ -90,6 +90,11 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
         run = script.oracle_run(setting, args)
     assert "reusing" in capsys.readouterr().out and stored.stat().st_mtime_ns == before
     assert len(run["machines"]) == 2
+    # one run per start: the tuned knots and the earlier tuning the varied file lists
+    runs = json.loads(stored.read_text())["runs"]
+    assert len(runs) == len(run["starts"]) == 2 and run["starts"][0] == tuned
+    for k, row in enumerate(run["machines"]):
+        assert row["return"] == max(r["machines"][k]["return"] for r in runs)
 
 
 def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):

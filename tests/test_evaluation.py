@@ -5,6 +5,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+import yaml
 
 from abb_gym import SpeedProfile, simulate
 from abb_gym.baselines import families, profiles, tuner
@@ -370,6 +371,63 @@ def test_oracle_is_an_evaluation_result_of_the_same_machines():
         "at_speed [share]", "run_up_time [s]", "residual_vibration [W_r/e]", "return [-]"]
     with pytest.raises(ValueError, match="share no episode"):
         paired_gap(oracle, EvaluationResult("x", knots.env_id, "yoshida_odd", "test", 5), "return")
+
+
+def test_the_oracle_takes_the_best_run_per_machine():
+    """Runs from different starts on the same machines combine machine by machine into the
+    best return (the first run's on a tie); runs of other machines or rewards are refused."""
+    from abb_gym.baselines.oracle import best_of_runs, oracle_result
+
+    def run(start, returns, **changes):
+        base = {"scene": "yoshida_odd", "preset": "test", "seed": 5, "family": "knots",
+                "budget": 3, "env_kwargs": {}, "start": start,
+                "machines": [{"episode": k, "return": r, "residual_vibration": -r,
+                              "params": {"s": start}, "candidates": 3}
+                             for k, r in enumerate(returns)]}
+        return base | changes
+    a = run({"knot_speeds": [1.0]}, [-1.0, -5.0, -2.0, float("nan")])
+    b = run({"knot_speeds": [2.0]}, [-3.0, -4.0, -2.0, -9.0])
+    best = best_of_runs([a, b])
+    assert [m["return"] for m in best["machines"]] == [-1.0, -4.0, -2.0, -9.0]
+    assert [m["start_index"] for m in best["machines"]] == [0, 1, 0, 1]
+    assert best["starts"] == [a["start"], b["start"]]
+    assert [e["residual_vibration"] for e in oracle_result(best).episodes] == [1.0, 4.0, 2.0, 9.0]
+    assert "start_index" not in oracle_result(best).episodes[0]
+    assert len(best_of_runs([a, run(None, [0.0, 0.0])])["machines"]) == 2
+    for key, value in (("seed", 6), ("env_kwargs", {"reward": {"residual": 6.0}}),
+                       ("budget", 4), ("preset", "varied_test")):
+        with pytest.raises(ValueError, match=f"differ in '{key}'"):
+            best_of_runs([a, run(None, [0.0], **{key: value})])
+    with pytest.raises(ValueError, match="at least one run"):
+        best_of_runs([])
+
+
+def test_oracle_starts_come_from_the_baselines_file(tmp_path, monkeypatch):
+    from abb_gym import resources
+    from abb_gym.baselines.baseline_policy import oracle_starts
+    from abb_gym.configuration import ConfigError
+    assert oracle_starts("yoshida_odd", "knots") == []  # the shipped train-preset file
+    folder = tmp_path / "baselines"
+    folder.mkdir()
+    entry = {"params": {"knot_speeds": [100.0, 200.0], "knot_times": [0.1, 0.2]},
+             "oracle_starts": [{"knot_speeds": [150.0], "knot_times": [0.5]}]}
+    (folder / "yoshida_odd.yaml").write_text(yaml.safe_dump({"families": {"knots": entry}}))
+    monkeypatch.setenv(resources.ENV_VAR, str(tmp_path))
+    (start,) = oracle_starts("yoshida_odd", "knots")
+    assert start["knot_speeds"] == [150.0] and start["knot_times"] == [0.5]
+    entry["oracle_starts"] = [{"knot_speeds": [-1.0], "knot_times": [0.5]}]
+    (folder / "yoshida_odd.yaml").write_text(yaml.safe_dump({"families": {"knots": entry}}))
+    with pytest.raises(ConfigError, match="knot_speeds"):
+        oracle_starts("yoshida_odd", "knots")
+    entry["oracle_starts"] = {"knot_speeds": [150.0]}
+    (folder / "yoshida_odd.yaml").write_text(yaml.safe_dump({"families": {"knots": entry}}))
+    with pytest.raises(ConfigError, match="oracle_starts must be a list"):
+        oracle_starts("yoshida_odd", "knots")
+    # the shipped varied files list the earlier one-search tunings
+    monkeypatch.setenv(resources.ENV_VAR,
+                       str(resources.shipped_folder("baselines").parent / "varied"))
+    for scene in ("spannan_cfrp", "yoshida_odd"):
+        assert len(oracle_starts(scene, "knots")) == 1
 
 
 def test_tune_per_machine_from_a_start_never_ends_below_it():

@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .. import resources
-from ..configuration import read_yaml
+from ..configuration import ConfigError, read_yaml
 from ..envs.actions import dwell_action
 from ..physics import drive_law as dl
 from ..physics.drives import SpeedProfile
@@ -34,7 +34,7 @@ from ..physics.scene import Scene
 from .families import FAMILY_NAMES, build_family
 
 __all__ = ["BaselinePolicy", "ClosedLoopPolicy", "SpeedReferencePolicy", "tuned_parameters",
-           "tuned_file", "make_baseline", "load_baseline", "dwell_action", "FAMILY_NAMES"]
+           "tuned_file", "oracle_starts", "make_baseline", "load_baseline", "dwell_action", "FAMILY_NAMES"]
 
 
 
@@ -54,6 +54,21 @@ def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
         return None
     # validated against the family's declared parameters (unit, bounds)
     return build_family(family, **dict(entry["params"])).to_params()
+
+
+def oracle_starts(scene_name: str, family: str) -> list[dict[str, Any]]:
+    """Further starts of the per-machine oracle for a scene's ``family``: the ``oracle_starts``
+    list of its entry in ``baselines/<scene>.yaml`` (parameters of earlier tunings), each
+    validated like the tuned parameters; [] if none (:mod:`abb_gym.baselines.oracle`)."""
+    path = tuned_file(scene_name)
+    if path is None:
+        return []
+    entry = (read_yaml(path, "tuned baselines").get("families") or {}).get(family) or {}
+    starts = entry.get("oracle_starts") or []
+    if not isinstance(starts, list) or not all(isinstance(x, dict) for x in starts):
+        raise ConfigError(f"{path}: families.{family}.oracle_starts must be a list of "
+                          f"parameter mappings (got {starts!r:.80})")
+    return [build_family(family, **dict(x)).to_params() for x in starts]
 
 
 class SpeedReferencePolicy:
