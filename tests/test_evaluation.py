@@ -309,6 +309,29 @@ def test_tuner_survives_a_flat_objective(monkeypatch):
     assert all(1 <= f["candidates"] <= 21 for f in result["families"].values())
 
 
+def test_a_nan_return_never_wins_nor_blocks_a_finite_one(monkeypatch):
+    """Every comparison of the search ranks returns one way (tuner.return_score): a first
+    candidate (the default) with no finite return is beaten by any finite one found later,
+    in the first search and across restarts."""
+    calls = []
+
+    def nan_first(scene_name, family, candidates, *args, **kwargs):
+        rows = []
+        for c in candidates:
+            calls.append(c)
+            value = math.nan if len(calls) == 1 else -float(len(calls))
+            rows.append({"family": family, "params": c, "return": value, "run_up_time": 1.0,
+                         "residual_vibration": 1.0, "peak_whirl": 1.0, "at_speed": 1.0,
+                         "balanced": 0.0})
+        return rows
+    monkeypatch.setattr(tuner, "_evaluate_candidates", nan_first)
+    result = tuner.tune("yoshida_odd", families=("ramp",), budget=6, episodes=1, seed=0,
+                        progress=False, restarts=1, popsize=2)
+    entry = result["families"]["ramp"]
+    assert math.isfinite(entry["mean_return"]) and entry["mean_return"] == -2.0
+    assert math.isnan(entry["default_mean_return"])
+
+
 def test_tune_per_machine_tunes_each_test_machine_alone():
     """The oracle of the feedback gap: machine k is test episode k (seed + k), its default
     profile is one of its candidates, so its best return is never below the default's there."""

@@ -25,11 +25,10 @@ best of them is still what a planner that knows the machine reaches with this fa
 from __future__ import annotations
 
 import copy
-import math
 from typing import Any
 
 from ..evaluation.evaluate import EvaluationResult
-from .tuner import ENV_ID, tune_per_machine
+from .tuner import ENV_ID, return_score, tune_per_machine
 
 __all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best_of_runs"]
 
@@ -90,8 +89,7 @@ def best_of_runs(runs: list[dict[str, Any]]) -> dict[str, Any]:
     machines = []
     for k in range(n):
         rows = [run["machines"][k] for run in runs]
-        best = max(range(len(rows)), key=lambda i: (
-            rows[i]["return"] if math.isfinite(rows[i]["return"]) else -math.inf, -i))
+        best = max(range(len(rows)), key=lambda i: (return_score(rows[i]), -i))
         machines.append(dict(rows[best], start_index=best))
     out = {key: copy.deepcopy(first[key]) for key in _SAME_MACHINES}
     out["starts"] = [copy.deepcopy(run.get("start")) for run in runs]

@@ -199,6 +199,13 @@ def _shrink_bar(bar, budget: int, used: int) -> None:
         bar.refresh()
 
 
+def return_score(row: dict) -> float:
+    """How a candidate's (or a machine's) mean return ranks: itself, or -inf when it is not
+    finite, so that a NaN never wins a comparison and never blocks a finite one."""
+    r = row["return"]
+    return r if math.isfinite(r) else -math.inf
+
+
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
                 executor, bar, env_kwargs, start: dict | None = None,
@@ -219,7 +226,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
     rows = _evaluate_candidates(scene_name, family, first, episodes, seed, preset,
                                 executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)
     default = rows[0]
-    best = max(rows, key=lambda r: r["return"] if math.isfinite(r["return"]) else -math.inf)
+    best = max(rows, key=return_score)
     evaluations = len(rows)
     sigma0 = 0.3
     if x0 is None and start is None:
@@ -230,9 +237,8 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
         # maxstd: a step beyond half the unit box means nothing, and without a cap cma 4.x
         # fails on a flat objective ("not yet initialized (dimension needed)"), as when no
         # candidate of a family ever reaches the operating speed
-        opts = {"bounds": [0.0, 1.0], "seed": (seed + RUN_SEED_STRIDE * run) % (2 ** 31 - 1) + 1,
-                "verbose": -9,
-                "maxfevals": max(budget - 1, 1), "maxstd": 0.5}
+        opts = {"bounds": [0.0, 1.0], "verbose": -9, "maxfevals": max(budget - 1, 1),
+                "seed": (seed + RUN_SEED_STRIDE * run) % (2 ** 31 - 1) + 1, "maxstd": 0.5}
         if popsize:
             opts["popsize"] = popsize
         es = cma.CMAEvolutionStrategy(x0, sigma0, opts)
@@ -251,7 +257,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
                              for r in rows])
             evaluations += len(rows)
             for r in rows:
-                if r["return"] > best["return"]:
+                if return_score(r) > return_score(best):
                     best = r
     return best, default, evaluations
 
@@ -292,7 +298,7 @@ def _restarted_search(family: str, scene_name: str, scales: dict[str, float], bu
         n += m
         runs.append({"start": "random", "popsize": size, "candidates": m,
                      "best_return": round(found["return"], 5)})
-        if found["return"] > best["return"]:
+        if return_score(found) > return_score(best):
             best = found
     if not dim:  # nothing to restart: the bar's share of the restarts is not coming
         _shrink_bar(bar, budget * restarts, 0)
@@ -367,10 +373,9 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
 
 def _optimiser(version: str, budget: int, restarts: int, start: dict) -> str:
     """The ``optimiser`` line of a tuning result."""
-    text = f"CMA-ES (cma {version}), {budget} candidates per family"
-    if restarts:
-        text = (f"CMA-ES (cma {version}), {budget} candidates per search, 1 + {restarts} "
-                f"searches per family (IPOP restarts from random points)")
+    per = (f"{budget} candidates per search, 1 + {restarts} searches per family (IPOP "
+           f"restarts from random points)" if restarts else f"{budget} candidates per family")
+    text = f"CMA-ES (cma {version}), {per}"
     if start:
         text += f"; the first search refines the given parameters of {', '.join(start)}"
     return text
