@@ -34,7 +34,8 @@ from ..physics.scene import Scene
 from .families import FAMILY_NAMES, build_family
 
 __all__ = ["BaselinePolicy", "ClosedLoopPolicy", "SpeedReferencePolicy", "tuned_parameters",
-           "tuned_file", "oracle_starts", "make_baseline", "load_baseline", "dwell_action", "FAMILY_NAMES"]
+           "tuned_file", "oracle_starts", "make_baseline", "load_baseline", "dwell_action",
+           "FAMILY_NAMES"]
 
 
 
@@ -43,14 +44,19 @@ def tuned_file(scene_name: str):
     return resources.find("baselines", scene_name)
 
 
-def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
-    """Tuned parameters of ``family`` for a scene from ``baselines/<scene>.yaml``."""
+def _tuned_entry(scene_name: str, family: str):
+    """(the scene's ``baselines/<scene>.yaml`` or None, ``family``'s entry there or {})."""
     path = tuned_file(scene_name)
     if path is None:
-        return None
+        return None, {}
     data = read_yaml(path, "tuned baselines")
-    entry = (data.get("families") or {}).get(family)
-    if not entry or "params" not in entry:
+    return path, (data.get("families") or {}).get(family) or {}
+
+
+def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
+    """Tuned parameters of ``family`` for a scene from ``baselines/<scene>.yaml``."""
+    _, entry = _tuned_entry(scene_name, family)
+    if "params" not in entry:
         return None
     # validated against the family's declared parameters (unit, bounds)
     return build_family(family, **dict(entry["params"])).to_params()
@@ -60,10 +66,7 @@ def oracle_starts(scene_name: str, family: str) -> list[dict[str, Any]]:
     """Further starts of the per-machine oracle for a scene's ``family``: the ``oracle_starts``
     list of its entry in ``baselines/<scene>.yaml`` (parameters of earlier tunings), each
     validated like the tuned parameters; [] if none (:mod:`abb_gym.baselines.oracle`)."""
-    path = tuned_file(scene_name)
-    if path is None:
-        return []
-    entry = (read_yaml(path, "tuned baselines").get("families") or {}).get(family) or {}
+    path, entry = _tuned_entry(scene_name, family)
     starts = entry.get("oracle_starts") or []
     if not isinstance(starts, list) or not all(isinstance(x, dict) for x in starts):
         raise ConfigError(f"{path}: families.{family}.oracle_starts must be a list of "
