@@ -15,12 +15,14 @@ trained on ``varied``; episode k: seed + k) with the agent's own reward weights,
 
 The baselines are tuned on the agent's training preset, with its reward: ``configs/baselines``
 for ``train``, ``configs/<preset>/baselines`` for another (``configs/varied/baselines``); a
-family with no parameters tuned on that preset is left out.  For an agent trained on such a
-preset, the **oracle** (:mod:`abb_gym.baselines.oracle`: ``knots`` tuned by CMA-ES on each test
-machine alone, from the tuned ``knots``) joins the table, and a **feedback-gap** table puts the
-four families side by side: best open loop | closed-loop hand design | PPO | oracle.  The
-oracle's runs are kept in ``<out>/oracle/`` and reused while scene, preset, seed, reward and
-budget match (``--oracle-budget 0``: no oracle).
+family with no parameters tuned on that preset is left out.  For every agent, on ``test`` as
+on ``varied_test``, the **oracle** (:mod:`abb_gym.baselines.oracle`: ``knots`` tuned by CMA-ES
+on each test machine alone, from the tuned ``knots``) joins the table, and a **feedback-gap**
+table puts the four families side by side: best open loop | closed-loop hand design | PPO |
+oracle.  The oracle's runs are kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and
+reused while scene, preset, seed, reward, budget and start match, so agents that share them
+(the three yoshida_odd ``train`` agents) share one oracle; a file holds the runs of every
+reward its agents use (``--oracle-budget 0``: no oracle).
 
 On DwellProfile, the baselines its one action cannot express (every one above after tuning,
 since they carry their own run-up acceleration) run on RunUpSpeed, on the same machines
@@ -215,9 +217,10 @@ def oracle_run(setting: AgentSetting, args) -> dict:
                              args.oracle_budget, env_kwargs=setting.env_kwargs, start=start)
             computed = True
         runs.append(run)
-    if computed:
+    if computed:  # another reward's runs (another agent's oracle) stay in the file
+        kept = runs + [r for r in stored if r.get("env_kwargs") != setting.env_kwargs]
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"runs": runs}, indent=1, default=float))
+        path.write_text(json.dumps({"runs": kept}, indent=1, default=float))
     return best_of_runs(runs)
 
 
@@ -266,8 +269,7 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         results = [evaluate(setting.env_id, setting.scene, spec, args.episodes, args.seed,
                             setting.preset, **setting.env_kwargs) for spec in specs]
         oracle = None
-        if setting.configs is not None and args.oracle_budget > 0 \
-                and STRONGEST_OPEN_LOOP in baselines:
+        if args.oracle_budget > 0 and STRONGEST_OPEN_LOOP in baselines:
             oracle = oracle_result(oracle_run(setting, args), args.episodes)
     shown = results + ([oracle] if oracle else [])
     out = Path(args.out) / setting.folder.name
@@ -348,7 +350,7 @@ def replace_between_markers(path: Path, text: str, begin: str = BEGIN, end: str 
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "),
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("agents", nargs="*",
                    help="shipped agent names (agents/trained/<name>) or run folders; default: "

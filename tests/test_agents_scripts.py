@@ -1,7 +1,8 @@
 """The comparison script of the checkout, ``agents/evaluate.py`` (a repository tool: the wheel
 does not ship ``agents/*.py``): each agent is compared on its own held-out machines, with its
-own reward, against baselines tuned on its training preset, and an agent trained on ``varied``
-gets the oracle and the feedback-gap table, which regenerate the READMEs' marked sections."""
+own reward, against baselines tuned on its training preset, and every agent (on ``test`` as on
+``varied_test``) gets the oracle and the feedback-gap table, which regenerate the READMEs'
+marked sections."""
 from __future__ import annotations
 
 import argparse
@@ -95,6 +96,35 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     assert len(runs) == len(run["starts"]) == 2 and run["starts"][0] == tuned
     for k, row in enumerate(run["machines"]):
         assert row["return"] == max(r["machines"][k]["return"] for r in runs)
+
+
+def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_rewards(
+        script, tmp_path):
+    out = tmp_path / "results"
+    stored = out / "oracle" / "yoshida_odd_test_seed0.json"
+    stored.parent.mkdir(parents=True)
+    other = {"scene": "yoshida_odd", "preset": "test", "seed": 0, "family": "knots",
+             "budget": 3, "env_kwargs": {"reward": {"residual": 1.0}}, "start": None,
+             "machines": [{"return": 0.0}, {"return": 0.0}]}
+    stored.write_text(json.dumps({"runs": [other]}))
+    readme = tmp_path / "README.md"
+    readme.write_text(f"{script.GAP_BEGIN}\n{script.GAP_END}\n")
+    (tmp_path / "agents.md").write_text(f"{script.BEGIN}\n{script.END}\n")
+    rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "3",
+                      "--baselines", "knots", "retry", "--out", str(out),
+                      "--readme", str(tmp_path / "agents.md"), "--gap-readme", str(readme)])
+    assert rc == 0
+    assert "#### Feedback gap: yoshida_odd, test (RunUpSpeed-v0, trained on train)" \
+        in readme.read_text()
+    report = json.loads((out / "runup_speed_yoshida_odd" / "comparison.json").read_text())
+    assert report["feedback_gap"]["columns"]["oracle"] == "oracle:knots per machine"
+    # the oracle refined the knots tuned on train (the shipped file), and the run of the
+    # other reward is still in the file, untouched, after this agent's run was added
+    runs = json.loads(stored.read_text())["runs"]
+    assert [r["env_kwargs"] for r in runs] == [{"reward": {"residual": 6.0}}, other["env_kwargs"]]
+    assert runs[1] == other
+    tuned = yaml.safe_load((REPO / "configs" / "baselines" / "yoshida_odd.yaml").read_text())
+    assert runs[0]["start"] == tuned["families"]["knots"]["params"]
 
 
 def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):

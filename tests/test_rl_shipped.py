@@ -20,8 +20,14 @@ from abb_gym.rl import load_policy, make_native_env, run_episodes, trained_dir  
 AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "model.zip").exists())
 
 
+SHIPPED = ("dwell_profile_yoshida_odd", "runup_speed_spannan_cfrp",
+           "runup_speed_spannan_cfrp_varied", "runup_speed_spannan_cfrp_varied_finetuned",
+           "runup_speed_yoshida_odd", "runup_speed_yoshida_odd_varied",
+           "runup_torque_yoshida_odd")
+
+
 def test_agents_are_shipped():
-    assert len(AGENTS) >= 6, f"expected the six shipped agents, found {AGENTS}"
+    assert AGENTS == list(SHIPPED), f"expected the seven shipped agents {SHIPPED}"
 
 
 @pytest.mark.parametrize("name", AGENTS)
