@@ -224,6 +224,17 @@ def oracle_run(setting: AgentSetting, args) -> dict:
     return best_of_runs(runs)
 
 
+def _env_note(columns: dict) -> str:
+    """A sentence naming the environments when the table's families ran on different ones
+    (the oracle plans speed profiles on RunUpSpeed; the torque agent's baselines run on
+    RunUpTorque through its speed loop), all on the same machines."""
+    envs = {label: r.env_id.split("/")[-1] for label, r in columns.items()}
+    if len(set(envs.values())) == 1:
+        return ""
+    return ("  Environments (the same machines): " + ", ".join(
+        f"{label} on {env}" for label, env in envs.items()) + ".")
+
+
 def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args
                 ) -> tuple[str, dict]:
     """The feedback-gap table (four families side by side) and its paired gaps."""
@@ -247,7 +258,8 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
             f"of {', '.join(CLOSED_LOOP)}) tuned on {setting.train_preset}; the oracle tunes "
             f"knots on each machine alone ({args.oracle_budget} candidates from each start: the "
             f"tuned knots and the earlier tunings its baselines file lists; the best per "
-            f"machine).  Agent: `{setting.folder.name}`.\n\n" + family_table(columns) + "\n\n")
+            f"machine).  Agent: `{setting.folder.name}`."
+            + _env_note(columns) + "\n\n" + family_table(columns) + "\n\n")
     for name, gap in gaps.items():
         text += f"- {name}: " + ", ".join(
             f"{k} {_cell(v)}" for k, v in gap.items()

@@ -127,6 +127,15 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
     assert runs[0]["start"] == tuned["families"]["knots"]["params"]
 
 
+def test_a_gap_table_names_the_environments_only_when_they_differ(script):
+    from types import SimpleNamespace as Run
+    speed, torque = Run(env_id="abb_gym/RunUpSpeed-v0"), Run(env_id="abb_gym/RunUpTorque-v0")
+    assert script._env_note({"best open loop": speed, "oracle": speed}) == ""
+    note = script._env_note({"best open loop": torque, "PPO": torque, "oracle": speed})
+    assert note == ("  Environments (the same machines): best open loop on RunUpTorque-v0, "
+                    "PPO on RunUpTorque-v0, oracle on RunUpSpeed-v0.")
+
+
 def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):
     from abb_gym.plots import plot_training_curves
     from abb_gym.rl import trained_dir
