@@ -16,8 +16,8 @@ charts treat the oracle like any evaluated policy.
 
 The per-machine search is local and short (60 candidates by default): it stays in the basin of
 its start.  When the tuned profile moved to another basin (the spannan_cfrp ``knots`` re-tuned
-with restarts waits 47 s instead of 40 s), an oracle refining only it fell below a PPO agent
-in return, which an upper bound must not.  :func:`best_of_runs` therefore takes, machine by
+with restarts on 2026-11-23 waited 47 s instead of 40 s), an oracle refining only it fell below
+a PPO agent in return, which an upper bound must not.  :func:`best_of_runs` therefore takes, machine by
 machine, the best of runs from several starts (the tuned profile and the earlier tunings a
 baselines file lists as ``oracle_starts``): every run is a search on the same machine, so the
 best of them is still what a planner that knows the machine reaches with this family.
