@@ -427,7 +427,7 @@ def test_the_oracle_takes_the_best_run_per_machine():
 
 def test_oracle_starts_come_from_the_baselines_file(tmp_path, monkeypatch):
     from abb_gym import resources
-    from abb_gym.baselines.baseline_policy import oracle_starts
+    from abb_gym.baselines.baseline_policy import oracle_starts, tuned_parameters
     from abb_gym.configuration import ConfigError
     assert oracle_starts("yoshida_odd", "knots") == []  # the shipped train-preset file
     folder = tmp_path / "baselines"
@@ -446,6 +446,15 @@ def test_oracle_starts_come_from_the_baselines_file(tmp_path, monkeypatch):
     (folder / "yoshida_odd.yaml").write_text(yaml.safe_dump({"families": {"knots": entry}}))
     with pytest.raises(ConfigError, match="oracle_starts must be a list"):
         oracle_starts("yoshida_odd", "knots")
+    # a family entry, its params or the families themselves in the wrong shape are named
+    for data, field in (({"families": {"knots": [entry]}}, r"families\.knots must be a mapping"),
+                        ({"families": {"knots": {"params": [1.0]}}},
+                         r"families\.knots\.params must be a mapping"),
+                        ({"families": ["knots"]}, "families must be a mapping")):
+        (folder / "yoshida_odd.yaml").write_text(yaml.safe_dump(data))
+        for read in (oracle_starts, tuned_parameters):
+            with pytest.raises(ConfigError, match=field):
+                read("yoshida_odd", "knots")
     # the shipped varied files list the earlier tunings: spannan_cfrp's the ten-search and the
     # one-search tuning on the preset's own imbalance range, yoshida_odd's the one-search one
     monkeypatch.setenv(resources.ENV_VAR,

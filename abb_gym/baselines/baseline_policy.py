@@ -50,7 +50,18 @@ def _tuned_entry(scene_name: str, family: str):
     if path is None:
         return None, {}
     data = read_yaml(path, "tuned baselines")
-    return path, (data.get("families") or {}).get(family) or {}
+    families = data.get("families") or {} if isinstance(data, dict) else data
+    if not isinstance(families, dict):
+        raise ConfigError(f"{path}: families must be a mapping of family name to its entry "
+                          f"(got {families!r:.80})")
+    entry = families.get(family) or {}
+    if not isinstance(entry, dict):
+        raise ConfigError(f"{path}: families.{family} must be a mapping with params (and "
+                          f"optionally oracle_starts) (got {entry!r:.80})")
+    if "params" in entry and not isinstance(entry["params"], dict):
+        raise ConfigError(f"{path}: families.{family}.params must be a mapping of parameter "
+                          f"name to value (got {entry['params']!r:.80})")
+    return path, entry
 
 
 def tuned_parameters(scene_name: str, family: str) -> dict[str, Any] | None:
