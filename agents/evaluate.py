@@ -24,6 +24,13 @@ reused while scene, preset, seed, reward, budget and start match, so agents that
 (the three yoshida_odd ``train`` agents) share one oracle; a file holds the runs of every
 reward its agents use (``--oracle-budget 0``: no oracle).
 
+The oracle plans on each machine as drawn, the balls' initial angles included, which no drive
+measures.  The gap section therefore also replays each machine's oracle profile, and the tuned
+``knots`` beside it, with the balls started elsewhere (``--elsewhere-draws`` sets of angles per
+machine, drawn as the preset draws them: :func:`abb_gym.baselines.oracle.balls_elsewhere`):
+what is left of the oracle's gain there did not come from knowing where the balls start
+(``--elsewhere-draws 0``: not measured).
+
 On DwellProfile, the baselines its one action cannot express (every one above after tuning,
 since they carry their own run-up acceleration) run on RunUpSpeed, on the same machines
 (:func:`abb_gym.evaluation.evaluate.policy_env_id`); the tables mark the environment.
@@ -235,9 +242,32 @@ def _env_note(columns: dict) -> str:
         f"{label} on {env}" for label, env in envs.items()) + ".")
 
 
-def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args
-                ) -> tuple[str, dict]:
-    """The feedback-gap table (four families side by side) and its paired gaps."""
+_ELSEWHERE: dict = {}
+
+
+def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
+    """The paired gap oracle - knots with the balls started elsewhere (return, residual,
+    run-up), computed once per scene, preset, seed and reward in a process (the yoshida_odd
+    ``train`` agents share it)."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    from abb_gym.baselines.oracle import balls_elsewhere
+    from abb_gym.evaluation.report import paired_gap
+    key = (setting.scene, setting.preset, args.seed, args.episodes, args.elsewhere_draws,
+           json.dumps(setting.env_kwargs, sort_keys=True))
+    if key not in _ELSEWHERE:
+        print(f"oracle: {setting.scene} {setting.preset}, each machine's profile and knots "
+              f"with the balls started elsewhere ({args.elsewhere_draws} draws)", flush=True)
+        oracle, knots = balls_elsewhere(run, tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP),
+                                        args.elsewhere_draws, args.episodes)
+        _ELSEWHERE[key] = {k: paired_gap(oracle, knots, k)
+                           for k in ("return", "residual_vibration", "run_up_time")}
+    return _ELSEWHERE[key]
+
+
+def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args,
+                elsewhere: dict | None = None) -> tuple[str, dict]:
+    """The feedback-gap table (four families side by side) and its paired gaps; ``elsewhere``:
+    the oracle - knots gap with the balls started elsewhere (:func:`elsewhere_gap`)."""
     from abb_gym.evaluation.replay import feedback_value
     from abb_gym.evaluation.report import family_table, paired_gap
     ppo, replay = by_spec[ppo_spec], by_spec[f"replay:{ppo_spec}"]
@@ -250,6 +280,9 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
             "PPO - knots": {k: paired_gap(ppo, knots, k)
                             for k in ("return", "residual_vibration", "run_up_time")},
             "feedback value (replay - PPO)": feedback_value(ppo.episodes, replay.episodes)}
+    if elsewhere is not None:
+        gaps[f"oracle - knots, balls started elsewhere ({args.elsewhere_draws} draws per "
+             f"machine, both on the same draws)"] = elsewhere
     reward = setting.env_kwargs.get("reward", {})
     text = (f"#### Feedback gap: {setting.scene}, {setting.preset} "
             f"({setting.env_id.split('/')[-1]}, trained on {setting.train_preset})\n\n"
@@ -280,9 +313,12 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         specs = [ppo_spec, f"replay:{ppo_spec}"] + [f"baseline:{b}" for b in baselines]
         results = [evaluate(setting.env_id, setting.scene, spec, args.episodes, args.seed,
                             setting.preset, **setting.env_kwargs) for spec in specs]
-        oracle = None
+        oracle = elsewhere = None
         if args.oracle_budget > 0 and STRONGEST_OPEN_LOOP in baselines:
-            oracle = oracle_result(oracle_run(setting, args), args.episodes)
+            run = oracle_run(setting, args)
+            oracle = oracle_result(run, args.episodes)
+            if args.elsewhere_draws > 0:
+                elsewhere = elsewhere_gap(setting, run, args)
     shown = results + ([oracle] if oracle else [])
     out = Path(args.out) / setting.folder.name
     write_report(shown, out)
@@ -300,7 +336,7 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         text += f"\nGoal against knots: {goal_line(check)}.\n"
     gap_text, gap = "", {}
     if oracle is not None:
-        gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args)
+        gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args, elsewhere)
         text += "\n" + gap_text
     report = {"agent": setting.folder.name, "env_id": setting.env_id, "scene": setting.scene,
               "episodes": args.episodes, "seed": args.seed, "preset": setting.preset,
@@ -376,6 +412,9 @@ def main(argv=None) -> int:
                    help="baseline families to compare with")
     p.add_argument("--oracle-budget", type=int, default=60,
                    help="CMA-ES candidates per machine of the oracle (0: no oracle)")
+    p.add_argument("--elsewhere-draws", type=int, default=4,
+                   help="ball-angle draws per machine on which the oracle's profiles and knots "
+                        "run again with the balls started elsewhere (0: not measured)")
     p.add_argument("--out", default="agents/results", help="report folder")
     p.add_argument("--readme", type=Path, default=None,
                    help="regenerate the comparison section of this Markdown file (default "
@@ -397,6 +436,8 @@ def main(argv=None) -> int:
                              f"(got {args.episodes})")
         if args.oracle_budget < 0:
             raise ValueError(f"--oracle-budget must be >= 0 (got {args.oracle_budget})")
+        if args.elsewhere_draws < 0:
+            raise ValueError(f"--elsewhere-draws must be >= 0 (got {args.elsewhere_draws})")
         for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):
             if path is not None and not path.is_file():
                 raise ValueError(f"{flag} {path} is not a file")

@@ -49,8 +49,9 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     agents_readme.write_text(f"head\n{script.BEGIN}\nold tables\n{script.END}\ntail\n")
     out = tmp_path / "results"
     rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
-                      "3", "--baselines", "knots", "retry", "resonance_dwell", "--out",
-                      str(out), "--readme", str(agents_readme), "--gap-readme", str(readme)])
+                      "3", "--elsewhere-draws", "2", "--baselines", "knots", "retry",
+                      "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
+                      "--gap-readme", str(readme)])
     assert rc == 0
     gap = readme.read_text()
     assert gap.startswith("intro\n") and gap.endswith("end\n") and "old gap" not in gap
@@ -67,8 +68,13 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     columns = report["feedback_gap"]["columns"]
     assert columns["best open loop"].startswith("baseline:knots")
     assert columns["oracle"] == "oracle:knots per machine"
+    elsewhere = ("oracle - knots, balls started elsewhere (2 draws per machine, both on the "
+                 "same draws)")
     assert set(report["feedback_gap"]["gaps"]) == {
-        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)"}
+        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere}
+    # paired machine by machine: one pair per test machine, whatever the draws
+    assert all(v["n"] == 2 for v in report["feedback_gap"]["gaps"][elsewhere].values())
+    assert f"- {elsewhere}: return " in gap
     # the baselines are those tuned on varied, not the shipped ones tuned on train
     evaluation = json.loads((out / "runup_speed_yoshida_odd_varied" /
                              "evaluation.json").read_text())

@@ -476,3 +476,57 @@ def test_tune_per_machine_from_a_start_never_ends_below_it():
     x = tuner.unit_from_params("knots", start, tuner.search_scales("yoshida_odd"))
     back = tuner.params_from_unit("knots", x, tuner.search_scales("yoshida_odd"))
     np.testing.assert_allclose(back["knot_speeds"], start["knot_speeds"], rtol=1e-9)
+
+
+def test_ball_angles_drawn_as_the_preset_draws_them():
+    from abb_gym.envs.episodes import draw_ball_angles
+    from abb_gym.envs.setup import EnvSetup
+    setup = EnvSetup("speed", "yoshida_odd", "test")
+    lo, hi = setup.config.randomize.ball_angles
+    angles = draw_ball_angles(setup, np.random.default_rng(3))
+    assert angles.shape == (setup.scene.ball_count,)
+    assert np.all((angles >= lo) & (angles <= hi)) and len(set(angles.tolist())) == len(angles)
+    np.testing.assert_array_equal(angles, draw_ball_angles(setup, np.random.default_rng(3)))
+    with pytest.raises(ValueError, match="'nominal' fixes the initial ball angles"):
+        draw_ball_angles(EnvSetup("speed", "yoshida_odd", "nominal"), np.random.default_rng(3))
+
+
+def test_balls_elsewhere_replays_the_same_machines_with_only_the_balls_moved():
+    """The oracle's profiles replayed with the balls started elsewhere: the machines are the
+    test set's (a reset option with a machine's own angles repeats its episode to the bit),
+    only the ball angles move, and both profiles run on the same draws (a profile against
+    itself differs by exactly 0)."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    from abb_gym.baselines.oracle import balls_elsewhere
+    from abb_gym.evaluation.report import paired_gap
+    knots = tuned_parameters("yoshida_odd", "knots")
+    cand = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in knots.items()))
+    env = gym.make(tuner.ENV_ID, scene="yoshida_odd", preset="test")
+    exact, own_angles = [], []
+    for k in (0, 1):
+        (row,) = tuner._run_candidates(tuner.CandidateTask(tuner.ENV_ID, "yoshida_odd", "test",
+                                                           "knots", (cand,), (k,), 0))
+        exact.append(row)
+        _, info = env.reset(seed=k)
+        angles = tuple(float(a) for a in info["initial_ball_angles"])
+        (again,) = tuner._run_candidates(tuner.CandidateTask(
+            tuner.ENV_ID, "yoshida_odd", "test", "knots", (cand,), (k,), 0,
+            reset_options=(("ball_angles", angles),)))
+        assert again["return"] == row["return"]
+        assert again["residual_vibration"] == row["residual_vibration"]
+    run = {"scene": "yoshida_odd", "preset": "test", "seed": 0, "family": "knots",
+           "env_kwargs": {}, "machines": [dict(r, episode=k, params=knots)
+                                          for k, r in enumerate(exact)]}
+    oracle, compare = balls_elsewhere(run, knots, draws=2, progress=False)
+    assert [e["episode"] for e in oracle.episodes] == [0, 1]
+    assert all(e["draws"] == 2 for e in oracle.episodes)
+    for key in ("return", "residual_vibration", "run_up_time"):
+        gap = paired_gap(oracle, compare, key)
+        assert gap["mean"] == 0.0 and gap["n"] == 2
+    # the balls did move: the same profile on the same machines scores otherwise
+    assert [e["return"] for e in oracle.episodes] != [r["return"] for r in exact]
+    # and the draws are the same on every call
+    again, _ = balls_elsewhere(run, knots, draws=2, progress=False)
+    assert again.episodes == oracle.episodes
+    with pytest.raises(ValueError, match="draws must be an integer >= 1"):
+        balls_elsewhere(run, knots, draws=0)

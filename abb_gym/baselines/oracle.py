@@ -25,12 +25,20 @@ best of them is still what a planner that knows the machine reaches with this fa
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
-from ..evaluation.evaluate import EvaluationResult
-from .tuner import ENV_ID, return_score, tune_per_machine
+import numpy as np
+from tqdm import tqdm
 
-__all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best_of_runs"]
+from ..evaluation.evaluate import EvaluationResult
+from .tuner import ENV_ID, CandidateTask, _run_candidates, return_score, tune_per_machine
+
+__all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best_of_runs",
+           "balls_elsewhere"]
+
+# the stream of the ball-angle draws of :func:`balls_elsewhere`, apart from every episode seed
+BALLS_ELSEWHERE_STREAM = 0x0BA11
 
 
 def oracle_name(family: str = "knots") -> str:
@@ -116,3 +124,67 @@ def oracle_result(run: dict[str, Any], episodes: int | None = None,
                                 if k not in ("params", "candidates", "start_index")}
                                | {"policy": name})
     return result
+
+
+ELSEWHERE_METRICS = ("return", "residual_vibration", "run_up_time", "peak_whirl", "at_speed")
+
+
+def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4,
+                    episodes: int | None = None, progress: bool = True
+                    ) -> tuple[EvaluationResult, EvaluationResult]:
+    """How much of the oracle's gain is knowing where each machine's balls start.
+
+    The oracle plans on the machine exactly as the test episode draws it, the initial ball
+    angles included, which no drive measures.  Here each machine ``k`` of ``run`` (its first
+    ``episodes``) runs again ``draws`` times, every parameter as drawn but the balls started
+    elsewhere: angles drawn as the preset draws them (:func:`abb_gym.envs.episodes.draw_ball_angles`),
+    from a generator of their own (seeded by the run's seed and ``k``: the same draws on every
+    call).  Both the oracle's profile for machine ``k`` and ``compare`` (e.g. the tuned
+    ``knots``) run on the same draws.  Returns their results (oracle first), one row per
+    machine, each metric of :data:`ELSEWHERE_METRICS` the mean over the draws (``at_speed``
+    the share that settled; the residual over the draws that settled, NaN if none did), so that
+    :func:`abb_gym.evaluation.report.paired_gap` pairs them machine by machine."""
+    from ..envs.episodes import draw_ball_angles
+    from ..envs.setup import EnvSetup
+    if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1:
+        raise ValueError(f"draws must be an integer >= 1 (got {draws!r})")
+    machines = run["machines"] if episodes is None else run["machines"][:episodes]
+    env_kwargs = run.get("env_kwargs") or {}
+    setup = EnvSetup("speed", run["scene"], run["preset"], overrides=env_kwargs)
+    kw = tuple(sorted(env_kwargs.items()))
+    name = oracle_name(run.get("family", "knots"))
+    results = tuple(EvaluationResult(f"{label}, balls started elsewhere", ENV_ID, run["scene"],
+                                     run["preset"], run["seed"])
+                    for label in (name, "baseline:knots"))
+    with tqdm(total=len(machines) * draws, desc="oracle, balls started elsewhere",
+              unit="run-up pair", disable=not progress) as bar:
+        for row in machines:
+            k = int(row["episode"])
+            rng = np.random.default_rng((int(run["seed"]) + k, BALLS_ELSEWHERE_STREAM))
+            profiles = (_as_candidate(row["params"]), _as_candidate(compare))
+            scored = [[], []]
+            for _ in range(draws):
+                angles = tuple(float(a) for a in draw_ball_angles(setup, rng))
+                task = CandidateTask(ENV_ID, run["scene"], run["preset"],
+                                     run.get("family", "knots"), profiles, (k,), int(run["seed"]),
+                                     kw, reset_options=(("ball_angles", angles),))
+                for episode in _run_candidates(task):
+                    scored[episode["candidate"]].append(episode)
+                bar.update()
+            for result, rows in zip(results, scored):
+                result.episodes.append(_mean_row(rows, k, result.policy))
+    return results
+
+
+def _as_candidate(params: dict[str, Any]) -> tuple:
+    return tuple(sorted((key, tuple(v) if isinstance(v, list) else v)
+                        for key, v in params.items()))
+
+
+def _mean_row(rows: list[dict[str, Any]], episode: int, policy: str) -> dict[str, Any]:
+    out: dict[str, Any] = {"episode": episode, "policy": policy, "draws": len(rows)}
+    for key in ELSEWHERE_METRICS:
+        values = np.array([float(r[key]) for r in rows])
+        finite = values[np.isfinite(values)]
+        out[key] = float(finite.mean()) if finite.size else math.nan
+    return out

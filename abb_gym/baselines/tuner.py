@@ -104,6 +104,7 @@ class CandidateTask:
     episodes: tuple[int, ...]
     seed: int
     env_kwargs: tuple[tuple[str, Any], ...] = ()
+    reset_options: tuple[tuple[str, Any], ...] = ()
 
 
 def _policy_for(task: CandidateTask, pairs):
@@ -121,7 +122,8 @@ def _policy_for(task: CandidateTask, pairs):
 def _run_candidates(task: CandidateTask) -> list[dict]:
     pairs = [(c, k) for c in range(len(task.candidates)) for k in task.episodes]
     chunk = Chunk(task.env_id, task.scene, task.preset, f"sweep:{task.family}", task.seed,
-                  tuple(k for _, k in pairs), env_kwargs=task.env_kwargs)
+                  tuple(k for _, k in pairs), env_kwargs=task.env_kwargs,
+                  reset_options=task.reset_options)
     episodes, _ = run_chunk(chunk, _policy_for(task, pairs))
     for (c, _), row in zip(pairs, episodes):
         row["candidate"] = c

@@ -63,7 +63,7 @@ from .layout import (N_ST, S_ACC, S_AOP, S_AREF, S_DTMAX, S_MARK, S_NKEY, S_NSEG
 
 __all__ = ["RESET_OPTIONS", "MAX_STIFFNESS", "Episode", "EpisodeTable", "Pending", "draw",
            "prepare", "commit", "check_preset_stiffness", "check_preset_machines",
-           "reduce_angle", "episode_scene", "packed_rows", "loaded_rotor_mass"]
+           "reduce_angle", "episode_scene", "packed_rows", "loaded_rotor_mass", "draw_ball_angles"]
 
 RESET_OPTIONS = ("imbalance", "imbalance_ratio", "imbalance_phase", "ball_angles",
                  "ball_drag_scale", "rolling_resistance_scale", "critical_speed_scale",
@@ -262,6 +262,19 @@ def _opt_number(name: str, value: Any, lo: float | None, unit: str, inclusive: b
 def _uniform(lo_hi: Sequence[float], u):
     lo, hi = float(lo_hi[0]), float(lo_hi[1])
     return lo + (hi - lo) * u
+
+
+def draw_ball_angles(setup: Any, rng: np.random.Generator) -> np.ndarray:
+    """Initial ball angles [rad], one per ball, drawn as the preset draws them (uniform in its
+    ``randomize.ball_angles`` range) from ``rng``: the balls of a machine started somewhere else
+    (:func:`abb_gym.baselines.oracle.balls_elsewhere`).  ValueError if the preset fixes the
+    angles (``ball_angles: null``): then there is nowhere else to start them."""
+    span = setup.config.randomize.ball_angles
+    if span is None:
+        raise ValueError(f"preset {setup.config.name!r} fixes the initial ball angles "
+                         f"(randomize.ball_angles is null): there is nowhere else to start the "
+                         f"balls")
+    return _uniform(span, rng.random(setup.scene.ball_count))
 
 
 def draw(setup: Any, rng: np.random.Generator, options: Mapping[str, Any] | None

@@ -50,6 +50,9 @@ class Chunk:
     indices: tuple[int, ...]
     record: tuple[int, ...] = ()
     env_kwargs: tuple[tuple[str, Any], ...] = ()
+    # reset options for every episode of the chunk (e.g. ``ball_angles``: the same machines
+    # with the balls started elsewhere); values as tuples, so that a chunk stays hashable
+    reset_options: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass
@@ -106,7 +109,8 @@ def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict
         policy = policy(env)
     native = env.unwrapped
     setup = native.setup
-    obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices])
+    options = {key: list(v) if isinstance(v, tuple) else v for key, v in chunk.reset_options}
+    obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices], options=options or None)
     policy.reset(env, np.ones(n, bool))
     if on_step is not None:
         on_step(env, np.zeros(n, bool))
