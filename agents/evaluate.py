@@ -74,7 +74,7 @@ BEGIN, END = "<!-- comparison:begin -->", "<!-- comparison:end -->"
 GAP_BEGIN, GAP_END = "<!-- feedback-gap:begin -->", "<!-- feedback-gap:end -->"
 TRAINING_BEGIN, TRAINING_END = "<!-- training:begin -->", "<!-- training:end -->"
 GAP_COLUMNS = ("best open loop", "closed loop, hand-designed", "PPO (drive measurements)",
-               "oracle")
+               "oracle", "oracle, balls unknown")
 
 
 def goal_check(ppo, replay, knots) -> dict:
@@ -194,17 +194,24 @@ def configs_folder(folder: Path | None):
     return mock.patch.dict(os.environ, {} if folder is None else {ENV_VAR: str(folder)})
 
 
-def oracle_run(setting: AgentSetting, args) -> dict:
+def oracle_run(setting: AgentSetting, args, ball_draws: int = 0) -> dict:
     """The oracle of the agent's test machines: machine by machine the best of the per-machine
     searches from each start (the tuned knots, then the ``oracle_starts`` of its baselines
     file; :func:`abb_gym.baselines.oracle.best_of_runs`).  Each start's run is reused from
     ``<out>/oracle/`` if it matches, else computed (minutes: a progress bar counts the
-    candidates) and stored."""
+    candidates) and stored.  With ``ball_draws`` > 0 the oracle that knows the machine but not
+    where its balls start (``--machine-oracle-budget`` candidates, each scored on
+    ``ball_draws`` ball starts; from the tuned knots only, since each candidate costs
+    ``ball_draws`` run-ups), kept in ``..._balls_unknown.json``."""
     from abb_gym.baselines.baseline_policy import oracle_starts, tuned_parameters
     from abb_gym.baselines.oracle import best_of_runs, oracle_matches, run_oracle
-    path = Path(args.out) / "oracle" / f"{setting.scene}_{setting.preset}_seed{args.seed}.json"
-    starts = ([tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)]
-              + oracle_starts(setting.scene, STRONGEST_OPEN_LOOP))
+    suffix = "_balls_unknown" if ball_draws else ""
+    path = (Path(args.out) / "oracle"
+            / f"{setting.scene}_{setting.preset}_seed{args.seed}{suffix}.json")
+    budget = args.machine_oracle_budget if ball_draws else args.oracle_budget
+    starts = [tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)]
+    if not ball_draws:
+        starts += oracle_starts(setting.scene, STRONGEST_OPEN_LOOP)
     stored = []
     if path.is_file():
         data = json.loads(path.read_text())
@@ -212,16 +219,18 @@ def oracle_run(setting: AgentSetting, args) -> dict:
     runs, computed = [], False
     for k, start in enumerate(starts):
         run = next((r for r in stored if oracle_matches(
-            r, setting.scene, setting.preset, args.seed, args.episodes, args.oracle_budget,
-            setting.env_kwargs, start=start)), None)
+            r, setting.scene, setting.preset, args.seed, args.episodes, budget,
+            setting.env_kwargs, start=start, ball_draws=ball_draws)), None)
         if run is not None:
             print(f"oracle: reusing start {k + 1} of {len(starts)} from {path}", flush=True)
         else:
+            unknown = f", each on {ball_draws} ball starts" if ball_draws else ""
             print(f"oracle: tuning knots on each of {args.episodes} machines "
-                  f"({args.oracle_budget} candidates each, start {k + 1} of {len(starts)}) "
+                  f"({budget} candidates each{unknown}, start {k + 1} of {len(starts)}) "
                   f"-> {path}", flush=True)
             run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
-                             args.oracle_budget, env_kwargs=setting.env_kwargs, start=start)
+                             budget, env_kwargs=setting.env_kwargs, start=start,
+                             ball_draws=ball_draws)
             computed = True
         runs.append(run)
     if computed:  # another reward's runs (another agent's oracle) stay in the file
@@ -265,21 +274,28 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
 
 
 def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args,
-                elsewhere: dict | None = None) -> tuple[str, dict]:
-    """The feedback-gap table (four families side by side) and its paired gaps; ``elsewhere``:
-    the oracle - knots gap with the balls started elsewhere (:func:`elsewhere_gap`)."""
+                elsewhere: dict | None = None, unknown=None) -> tuple[str, dict]:
+    """The feedback-gap table (the families side by side) and its paired gaps; ``elsewhere``:
+    the oracle - knots gap with the balls started elsewhere (:func:`elsewhere_gap`);
+    ``unknown``: the oracle that knows the machine but not its balls (a fifth column)."""
     from abb_gym.evaluation.replay import feedback_value
     from abb_gym.evaluation.report import family_table, paired_gap
     ppo, replay = by_spec[ppo_spec], by_spec[f"replay:{ppo_spec}"]
     knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
     closed = [by_spec[f"baseline:{b}"] for b in CLOSED_LOOP if f"baseline:{b}" in by_spec]
     best_closed = max(closed, key=lambda r: r.summary()["return"]["mean"])
-    columns = dict(zip(GAP_COLUMNS, (knots, best_closed, ppo, oracle)))
+    columns = dict(zip(GAP_COLUMNS, (knots, best_closed, ppo, oracle, unknown)))
+    if unknown is None:
+        del columns[GAP_COLUMNS[-1]]
     gaps = {"oracle - knots": {k: paired_gap(oracle, knots, k)
                                for k in ("return", "residual_vibration", "run_up_time")},
             "PPO - knots": {k: paired_gap(ppo, knots, k)
                             for k in ("return", "residual_vibration", "run_up_time")},
             "feedback value (replay - PPO)": feedback_value(ppo.episodes, replay.episodes)}
+    if unknown is not None:
+        gaps["oracle, balls unknown - knots"] = {
+            k: paired_gap(unknown, knots, k)
+            for k in ("return", "residual_vibration", "run_up_time")}
     if elsewhere is not None:
         gaps[f"oracle - knots, balls started elsewhere ({args.elsewhere_draws} draws per "
              f"machine, both on the same draws)"] = elsewhere
@@ -291,7 +307,13 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
             f"of {', '.join(CLOSED_LOOP)}) tuned on {setting.train_preset}; the oracle tunes "
             f"knots on each machine alone ({args.oracle_budget} candidates from each start: the "
             f"tuned knots and the earlier tunings its baselines file lists; the best per "
-            f"machine).  Agent: `{setting.folder.name}`."
+            f"machine)"
+            + ("" if unknown is None else
+               f"; the oracle with the balls unknown knows the machine but not where its balls"
+               f" start ({args.machine_oracle_budget} candidates from the tuned knots, each "
+               f"scored on {args.machine_oracle_draws} ball starts drawn as the preset draws "
+               f"them, then run on the machine as drawn)")
+            + f".  Agent: `{setting.folder.name}`."
             + _env_note(columns) + "\n\n" + family_table(columns) + "\n\n")
     for name, gap in gaps.items():
         text += f"- {name}: " + ", ".join(
@@ -313,13 +335,16 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         specs = [ppo_spec, f"replay:{ppo_spec}"] + [f"baseline:{b}" for b in baselines]
         results = [evaluate(setting.env_id, setting.scene, spec, args.episodes, args.seed,
                             setting.preset, **setting.env_kwargs) for spec in specs]
-        oracle = elsewhere = None
+        oracle = elsewhere = unknown = None
         if args.oracle_budget > 0 and STRONGEST_OPEN_LOOP in baselines:
             run = oracle_run(setting, args)
             oracle = oracle_result(run, args.episodes)
             if args.elsewhere_draws > 0:
                 elsewhere = elsewhere_gap(setting, run, args)
-    shown = results + ([oracle] if oracle else [])
+            if args.machine_oracle_draws > 0 and args.machine_oracle_budget > 0:
+                unknown = oracle_result(oracle_run(setting, args, args.machine_oracle_draws),
+                                        args.episodes)
+    shown = results + [r for r in (oracle, unknown) if r is not None]
     out = Path(args.out) / setting.folder.name
     write_report(shown, out)
     by_spec = dict(zip(specs, results))
@@ -336,7 +361,8 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         text += f"\nGoal against knots: {goal_line(check)}.\n"
     gap_text, gap = "", {}
     if oracle is not None:
-        gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args, elsewhere)
+        gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args, elsewhere,
+                                    unknown)
         text += "\n" + gap_text
     report = {"agent": setting.folder.name, "env_id": setting.env_id, "scene": setting.scene,
               "episodes": args.episodes, "seed": args.seed, "preset": setting.preset,
@@ -412,6 +438,11 @@ def main(argv=None) -> int:
                    help="baseline families to compare with")
     p.add_argument("--oracle-budget", type=int, default=60,
                    help="CMA-ES candidates per machine of the oracle (0: no oracle)")
+    p.add_argument("--machine-oracle-budget", type=int, default=24,
+                   help="CMA-ES candidates per machine of the oracle that knows the machine but "
+                        "not where its balls start (0: none)")
+    p.add_argument("--machine-oracle-draws", type=int, default=3,
+                   help="ball starts each candidate of that oracle is scored on (0: none)")
     p.add_argument("--elsewhere-draws", type=int, default=4,
                    help="ball-angle draws per machine on which the oracle's profiles and knots "
                         "run again with the balls started elsewhere (0: not measured)")
@@ -436,6 +467,10 @@ def main(argv=None) -> int:
                              f"(got {args.episodes})")
         if args.oracle_budget < 0:
             raise ValueError(f"--oracle-budget must be >= 0 (got {args.oracle_budget})")
+        for flag in ("machine_oracle_budget", "machine_oracle_draws"):
+            if getattr(args, flag) < 0:
+                raise ValueError(f"--{flag.replace('_', '-')} must be >= 0 "
+                                 f"(got {getattr(args, flag)})")
         if args.elsewhere_draws < 0:
             raise ValueError(f"--elsewhere-draws must be >= 0 (got {args.elsewhere_draws})")
         for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):

@@ -49,7 +49,8 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     agents_readme.write_text(f"head\n{script.BEGIN}\nold tables\n{script.END}\ntail\n")
     out = tmp_path / "results"
     rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
-                      "3", "--elsewhere-draws", "2", "--baselines", "knots", "retry",
+                      "3", "--elsewhere-draws", "2", "--machine-oracle-budget", "3",
+                      "--machine-oracle-draws", "2", "--baselines", "knots", "retry",
                       "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
                       "--gap-readme", str(readme)])
     assert rc == 0
@@ -71,7 +72,13 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     elsewhere = ("oracle - knots, balls started elsewhere (2 draws per machine, both on the "
                  "same draws)")
     assert set(report["feedback_gap"]["gaps"]) == {
-        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere}
+        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere,
+        "oracle, balls unknown - knots"}
+    assert columns["oracle, balls unknown"] == "oracle:knots per machine, balls unknown"
+    (unknown,) = json.loads((out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json"
+                             ).read_text())["runs"]
+    assert unknown["ball_draws"] == 2 and unknown["budget"] == 3
+    assert len(unknown["machines"]) == 2
     # paired machine by machine: one pair per test machine, whatever the draws
     assert all(v["n"] == 2 for v in report["feedback_gap"]["gaps"][elsewhere].values())
     assert f"- {elsewhere}: return " in gap

@@ -530,3 +530,22 @@ def test_balls_elsewhere_replays_the_same_machines_with_only_the_balls_moved():
     assert again.episodes == oracle.episodes
     with pytest.raises(ValueError, match="draws must be an integer >= 1"):
         balls_elsewhere(run, knots, draws=0)
+
+
+def test_candidates_scored_on_several_ball_starts_take_the_mean_over_all():
+    """A search that knows the machine but not its balls scores each candidate on several
+    ball starts: the mean over the option sets is the mean of the separate runs."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    knots = tuned_parameters("yoshida_odd", "knots")
+    starts = ((("ball_angles", (0.3, -2.0)),), (("ball_angles", (1.5, 2.5)),))
+    both = tuner._evaluate_candidates("yoshida_odd", "knots", [knots, {}], 1, 4, "test", None,
+                                      option_sets=starts)
+    alone = [tuner._evaluate_candidates("yoshida_odd", "knots", [knots, {}], 1, 4, "test",
+                                        None, option_sets=(o,)) for o in starts]
+    assert alone[0][0]["return"] != alone[1][0]["return"]  # the balls' start matters
+    for c in range(2):
+        for key in ("return", "run_up_time", "peak_whirl"):
+            assert both[c][key] == pytest.approx((alone[0][c][key] + alone[1][c][key]) / 2,
+                                                 rel=1e-12)
+    with pytest.raises(ValueError, match="ball_draws must be an integer >= 0"):
+        tuner.tune_per_machine("yoshida_odd", episodes=1, budget=1, ball_draws=-1)

@@ -41,29 +41,33 @@ __all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best
 BALLS_ELSEWHERE_STREAM = 0x0BA11
 
 
-def oracle_name(family: str = "knots") -> str:
-    """The policy name of the oracle in tables and charts."""
-    return f"oracle:{family} per machine"
+def oracle_name(family: str = "knots", ball_draws: int = 0) -> str:
+    """The policy name of the oracle in tables and charts (``ball_draws`` > 0: the oracle
+    that knows the machine but not where its balls start)."""
+    return f"oracle:{family} per machine" + (", balls unknown" if ball_draws else "")
 
 
 def run_oracle(scene: str, preset: str, episodes: int = 100, seed: int = 0, budget: int = 60,
                env_kwargs: dict[str, Any] | None = None, start: dict[str, Any] | None = None,
-               family: str = "knots", executor=None, progress: bool = True) -> dict[str, Any]:
+               family: str = "knots", executor=None, progress: bool = True,
+               ball_draws: int = 0) -> dict[str, Any]:
     """Tune ``family`` on each of the ``episodes`` test machines of ``preset`` (``budget``
-    CMA-ES candidates per machine, from ``start`` if given) with the reward of ``env_kwargs``.
-    Returns the run: its inputs and one row per machine (every evaluation metric, ``params``,
-    ``candidates``)."""
+    CMA-ES candidates per machine, from ``start`` if given) with the reward of ``env_kwargs``;
+    with ``ball_draws`` > 0 knowing the machine but not where its balls start
+    (:func:`~abb_gym.baselines.tuner.tune_per_machine`).  Returns the run: its inputs and one
+    row per machine (every evaluation metric, ``params``, ``candidates``)."""
     rows = tune_per_machine(scene, family, episodes, seed, preset, budget,
                             env_kwargs=env_kwargs, executor=executor, progress=progress,
-                            start=start)
+                            start=start, ball_draws=ball_draws)
     return {"scene": scene, "preset": preset, "seed": int(seed), "family": family,
             "budget": int(budget), "env_kwargs": copy.deepcopy(env_kwargs or {}),
-            "start": copy.deepcopy(start), "machines": rows}
+            "start": copy.deepcopy(start), "ball_draws": int(ball_draws), "machines": rows}
 
 
 def oracle_matches(run: dict[str, Any], scene: str, preset: str, seed: int, episodes: int,
                    budget: int, env_kwargs: dict[str, Any] | None = None,
-                   family: str = "knots", start: dict[str, Any] | None = None) -> bool:
+                   family: str = "knots", start: dict[str, Any] | None = None,
+                   ball_draws: int = 0) -> bool:
     """True if the stored ``run`` covers these machines (the first ``episodes`` of the same
     seeded test set) with the same reward, family, budget and warm start (a re-tuned baseline
     is a new start: the oracle must again be at least the baseline on every machine)."""
@@ -72,12 +76,14 @@ def oracle_matches(run: dict[str, Any], scene: str, preset: str, seed: int, epis
                 and run["family"] == family and run["budget"] == budget
                 and run["env_kwargs"] == (env_kwargs or {})
                 and _same_params(run.get("start"), start)
+                and run.get("ball_draws", 0) == ball_draws
                 and len(run["machines"]) >= episodes)
     except (KeyError, TypeError):
         return False
 
 
-_SAME_MACHINES = ("scene", "preset", "seed", "family", "budget", "env_kwargs")
+# (runs stored before ``ball_draws`` existed knew the balls: 0)
+_SAME_MACHINES = ("scene", "preset", "seed", "family", "budget", "env_kwargs", "ball_draws")
 
 
 def best_of_runs(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -90,16 +96,16 @@ def best_of_runs(runs: list[dict[str, Any]]) -> dict[str, Any]:
     first = runs[0]
     for run in runs[1:]:
         for key in _SAME_MACHINES:
-            if run[key] != first[key]:
-                raise ValueError(f"oracle runs differ in {key!r}: {first[key]!r} and "
-                                 f"{run[key]!r}")
+            if run.get(key, 0) != first.get(key, 0):
+                raise ValueError(f"oracle runs differ in {key!r}: {first.get(key, 0)!r} and "
+                                 f"{run.get(key, 0)!r}")
     n = min(len(run["machines"]) for run in runs)
     machines = []
     for k in range(n):
         rows = [run["machines"][k] for run in runs]
         best = max(range(len(rows)), key=lambda i: (return_score(rows[i]), -i))
         machines.append(dict(rows[best], start_index=best))
-    out = {key: copy.deepcopy(first[key]) for key in _SAME_MACHINES}
+    out = {key: copy.deepcopy(first.get(key, 0)) for key in _SAME_MACHINES}
     out["starts"] = [copy.deepcopy(run.get("start")) for run in runs]
     out["machines"] = machines
     return out
@@ -117,7 +123,7 @@ def oracle_result(run: dict[str, Any], episodes: int | None = None,
                   env_id: str = ENV_ID) -> EvaluationResult:
     """The oracle run as an evaluation result (its first ``episodes`` machines)."""
     machines = run["machines"] if episodes is None else run["machines"][:episodes]
-    name = oracle_name(run.get("family", "knots"))
+    name = oracle_name(run.get("family", "knots"), run.get("ball_draws", 0))
     result = EvaluationResult(name, env_id, run["scene"], run["preset"], run["seed"])
     for row in machines:
         result.episodes.append({k: v for k, v in row.items()

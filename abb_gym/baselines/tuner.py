@@ -40,13 +40,18 @@ OBJECTIVE = "mean return on the preset (the environment's reward)"
 RUN_SEED_STRIDE = 7919
 
 
+_KINDS = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
+          "abb_gym/DwellProfile-v0": "dwell"}
+# the stream of the ball-angle draws a per-machine search scores on (``ball_draws``), apart
+# from every episode seed and from the draws of :func:`abb_gym.baselines.oracle.balls_elsewhere`
+SEARCH_BALLS_STREAM = 0x0BA12
+
+
 def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
                   ) -> dict[str, float]:
     """The units of the search boxes for a scene and environment preset."""
     from ..envs.setup import EnvSetup
-    kind = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
-            "abb_gym/DwellProfile-v0": "dwell"}[env_id]
-    setup = EnvSetup(kind, scene_name, preset)
+    setup = EnvSetup(_KINDS[env_id], scene_name, preset)
     sc = setup.scene.replace(drive_operating_speed=setup.operating_speed)
     out = profiles.scales(sc)
     a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed)
@@ -149,29 +154,31 @@ def evaluate_candidates(scene_name: str, family: str, candidates: list[dict], ep
 
 
 def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset, executor,
-                         per_task=256, env_id=ENV_ID, progress=False, env_kwargs=None, bar=None):
+                         per_task=256, env_id=ENV_ID, progress=False, env_kwargs=None, bar=None,
+                         option_sets=((),)):
     """:func:`evaluate_candidates` with the scene, counts and environment already checked
     (the tuner and the sweep check them once, not once per CMA-ES generation).  ``bar``: a
     tqdm bar counting candidates, advanced as each task's candidates finish (else, with
-    ``progress``, a bar of its own)."""
+    ``progress``, a bar of its own).  ``option_sets``: reset options (``CandidateTask``'s
+    form); every candidate runs its episodes once under each, and its means are over all."""
     for c in candidates:
         build_family(family, **c)  # validate every candidate before any runs
-    per = max(1, per_task // episodes)
+    per = max(1, per_task // (episodes * len(option_sets)))
     cand = [tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in c.items()))
             for c in candidates]
     kw = tuple(sorted((env_kwargs or {}).items()))
     tasks = [CandidateTask(env_id, scene_name, preset, family, tuple(cand[a:a + per]),
-                           tuple(range(episodes)), seed, kw)
-             for a in range(0, len(cand), per)]
+                           tuple(range(episodes)), seed, kw, options)
+             for a in range(0, len(cand), per) for options in option_sets]
     own = bar is None and progress
     if own:
         bar = tqdm(total=len(cand), desc=f"{family}: candidates", unit="candidate")
     try:
         if executor is None:  # this process; the vector environment already uses every core
             parts = []
-            for t in tasks:
+            for i, t in enumerate(tasks):
                 parts.append(_run_candidates(t))
-                if bar is not None:
+                if bar is not None and (i + 1) % len(option_sets) == 0:
                     bar.update(len(t.candidates))
         else:  # the executor shows its tasks; the candidates count when all are back
             parts = executor.map(_run_candidates, tasks, desc=f"{family}: candidate batches")
@@ -181,9 +188,12 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
         if own:
             bar.close()
     rows = []
-    for a, part in zip(range(0, len(cand), per), parts):
-        for c in range(len(tasks[a // per].candidates)):
-            eps = [e for e in part if e["candidate"] == c]
+    parts = list(parts)
+    for b, a in enumerate(range(0, len(cand), per)):
+        runs = [e for part in parts[b * len(option_sets):(b + 1) * len(option_sets)]
+                for e in part]
+        for c in range(len(tasks[b * len(option_sets)].candidates)):
+            eps = [e for e in runs if e["candidate"] == c]
             mean = {}
             for k in SUMMARY_KEYS:
                 vals = np.array([float(e[k]) for e in eps])
@@ -211,7 +221,8 @@ def return_score(row: dict) -> float:
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
                 executor, bar, env_kwargs, start: dict | None = None,
-                x0: np.ndarray | None = None, run: int = 0) -> tuple[dict, dict, int]:
+                x0: np.ndarray | None = None, run: int = 0, option_sets=((),)
+                ) -> tuple[dict, dict, int]:
     """CMA-ES over the unit box from its centre; or from ``start`` (parameters, also a
     candidate, with a smaller initial step: a refinement); or from ``x0`` (a point of the unit
     box, itself the first candidate, with the full initial step: a restart).  ``run`` numbers
@@ -226,7 +237,8 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
     else:
         first = [{}] if start is None else [{}, dict(start)]
     rows = _evaluate_candidates(scene_name, family, first, episodes, seed, preset,
-                                executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar)
+                                executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar,
+                                option_sets=option_sets)
     default = rows[0]
     best = max(rows, key=return_score)
     evaluations = len(rows)
@@ -253,7 +265,7 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
             cands = [params_from_unit(family, x, scales) for x in xs]
             rows = _evaluate_candidates(scene_name, family, cands, episodes, seed, preset,
                                         executor, env_id=env_id, env_kwargs=env_kwargs,
-                                        bar=bar)
+                                        bar=bar, option_sets=option_sets)
             if len(xs) == es.popsize:
                 es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9
                              for r in rows])
@@ -387,7 +399,8 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
                      seed: int = 0, preset: str = "test", budget: int = 120,
                      env_id: str = ENV_ID, env_kwargs: dict[str, Any] | None = None,
                      executor=None, progress: bool = True,
-                     start: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+                     start: dict[str, Any] | None = None,
+                     ball_draws: int = 0) -> list[dict[str, Any]]:
     """A clairvoyant open-loop oracle: ``family`` tuned by CMA-ES on each test machine alone.
 
     Machine ``k`` is episode ``k`` of the seeded test set (the reset with seed ``seed + k``,
@@ -399,8 +412,19 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     candidates, so the oracle never scores below ``start`` on any machine.  Returns one row
     per machine: the episode of its best candidate with every metric an evaluation gives
     (:data:`abb_gym.evaluation.evaluate.METRICS`, ``episode`` = k, ``seed`` = seed + k), plus
-    ``params`` and ``candidates`` (how many it tried)."""
+    ``params`` and ``candidates`` (how many it tried).
+
+    With ``ball_draws`` = M > 0 the search knows the machine but not where its balls start:
+    every candidate is scored by its mean over M runs of machine ``k`` with the balls started
+    at angles drawn as the preset draws them (a generator of their own, seeded by ``seed + k``:
+    the same draws for every candidate), and the best is then scored on the machine as drawn,
+    with ball angles the search never saw.  That is an open-loop planner that knows every
+    parameter of the machine (the preset's ``varied`` scales, the imbalance) but not the
+    balls; ``start`` is then one of its candidates on the draws, not a floor on the machine."""
     _check_counts(budget=budget, episodes=episodes)
+    if isinstance(ball_draws, bool) or not isinstance(ball_draws, (int, np.integer)) \
+            or ball_draws < 0:
+        raise ValueError(f"ball_draws must be an integer >= 0 (got {ball_draws!r})")
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     family_class(family)
     scales = search_scales(scene_name, env_id, preset)
@@ -409,8 +433,18 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
               unit="candidate", disable=not progress) as bar:
         for k in range(episodes):
+            option_sets = ((),)
+            if ball_draws:
+                from ..envs.episodes import draw_ball_angles
+                from ..envs.setup import EnvSetup
+                setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
+                rng = np.random.default_rng((seed + k, SEARCH_BALLS_STREAM))
+                option_sets = tuple(
+                    (("ball_angles", tuple(float(a) for a in draw_ball_angles(setup, rng))),)
+                    for _ in range(ball_draws))
             best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
-                                     preset, env_id, executor, bar, env_kwargs, start)
+                                     preset, env_id, executor, bar, env_kwargs, start,
+                                     option_sets=option_sets)
             _shrink_bar(bar, budget, n)
             # the search keeps means of a few metrics; the best candidate's episode once more
             # (deterministic: the same numbers) gives all of them
