@@ -21,6 +21,14 @@ a PPO agent in return, which an upper bound must not.  :func:`best_of_runs` ther
 machine, the best of runs from several starts (the tuned profile and the earlier tunings a
 baselines file lists as ``oracle_starts``): every run is a search on the same machine, so the
 best of them is still what a planner that knows the machine reaches with this family.
+
+Knowing the machine includes knowing where its balls start, which no drive measures.  Two
+measures separate that knowledge from the rest: :func:`balls_elsewhere` replays each machine's
+oracle profile with the balls started elsewhere, and :func:`run_oracle` with ``ball_draws``
+searches knowing every parameter of the machine but not the balls (each candidate scored on
+several ball starts, the best then run on the machine as drawn).  On the shipped scenes and
+presets (2026-11-24, README "Feedback gap on machines that differ") the oracle's gain over the
+tuned ``knots`` is almost all the balls' start.
 """
 from __future__ import annotations
 
@@ -32,7 +40,8 @@ import numpy as np
 from tqdm import tqdm
 
 from ..evaluation.evaluate import EvaluationResult
-from .tuner import ENV_ID, CandidateTask, _run_candidates, return_score, tune_per_machine
+from .tuner import (ENV_ID, CandidateTask, _run_candidates, ball_starts, return_score,
+                    tune_per_machine)
 
 __all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best_of_runs",
            "balls_elsewhere"]
@@ -143,14 +152,13 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     The oracle plans on the machine exactly as the test episode draws it, the initial ball
     angles included, which no drive measures.  Here each machine ``k`` of ``run`` (its first
     ``episodes``) runs again ``draws`` times, every parameter as drawn but the balls started
-    elsewhere: angles drawn as the preset draws them (:func:`abb_gym.envs.episodes.draw_ball_angles`),
-    from a generator of their own (seeded by the run's seed and ``k``: the same draws on every
-    call).  Both the oracle's profile for machine ``k`` and ``compare`` (e.g. the tuned
-    ``knots``) run on the same draws.  Returns their results (oracle first), one row per
+    elsewhere: angles drawn as the preset draws them (:func:`~abb_gym.baselines.tuner.
+    ball_starts`), from a generator of their own (seeded by the run's seed and ``k``: the same
+    draws on every call).  Both the oracle's profile for machine ``k`` and ``compare`` (e.g.
+    the tuned ``knots``) run on the same draws.  Returns their results (oracle first), one row per
     machine, each metric of :data:`ELSEWHERE_METRICS` the mean over the draws (``at_speed``
     the share that settled; the residual over the draws that settled, NaN if none did), so that
     :func:`abb_gym.evaluation.report.paired_gap` pairs them machine by machine."""
-    from ..envs.episodes import draw_ball_angles
     from ..envs.setup import EnvSetup
     if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1:
         raise ValueError(f"draws must be an integer >= 1 (got {draws!r})")
@@ -166,14 +174,13 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
               unit="run-up pair", disable=not progress) as bar:
         for row in machines:
             k = int(row["episode"])
-            rng = np.random.default_rng((int(run["seed"]) + k, BALLS_ELSEWHERE_STREAM))
             profiles = (_as_candidate(row["params"]), _as_candidate(compare))
             scored = [[], []]
-            for _ in range(draws):
-                angles = tuple(float(a) for a in draw_ball_angles(setup, rng))
+            for options in ball_starts(setup, int(run["seed"]) + k, BALLS_ELSEWHERE_STREAM,
+                                       draws):
                 task = CandidateTask(ENV_ID, run["scene"], run["preset"],
                                      run.get("family", "knots"), profiles, (k,), int(run["seed"]),
-                                     kw, reset_options=(("ball_angles", angles),))
+                                     kw, reset_options=options)
                 for episode in _run_candidates(task):
                     scored[episode["candidate"]].append(episode)
                 bar.update()

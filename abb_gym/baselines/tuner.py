@@ -47,6 +47,16 @@ _KINDS = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
 SEARCH_BALLS_STREAM = 0x0BA12
 
 
+def ball_starts(setup: Any, key: int, stream: int, count: int) -> tuple:
+    """``count`` reset-option sets (``CandidateTask.reset_options``), each starting the balls at
+    angles drawn as ``setup``'s preset draws them, from the generator seeded by ``(key,
+    stream)``: the same sets on every call."""
+    from ..envs.episodes import draw_ball_angles
+    rng = np.random.default_rng((int(key), int(stream)))
+    return tuple((("ball_angles", tuple(float(a) for a in draw_ball_angles(setup, rng))),)
+                 for _ in range(count))
+
+
 def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
                   ) -> dict[str, float]:
     """The units of the search boxes for a scene and environment preset."""
@@ -432,16 +442,13 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     rows = []
     with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
               unit="candidate", disable=not progress) as bar:
+        if ball_draws:
+            from ..envs.setup import EnvSetup
+            setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
         for k in range(episodes):
             option_sets = ((),)
             if ball_draws:
-                from ..envs.episodes import draw_ball_angles
-                from ..envs.setup import EnvSetup
-                setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
-                rng = np.random.default_rng((seed + k, SEARCH_BALLS_STREAM))
-                option_sets = tuple(
-                    (("ball_angles", tuple(float(a) for a in draw_ball_angles(setup, rng))),)
-                    for _ in range(ball_draws))
+                option_sets = ball_starts(setup, seed + k, SEARCH_BALLS_STREAM, ball_draws)
             best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
                                      preset, env_id, executor, bar, env_kwargs, start,
                                      option_sets=option_sets)
