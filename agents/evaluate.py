@@ -18,8 +18,10 @@ for ``train``, ``configs/<preset>/baselines`` for another (``configs/varied/base
 family with no parameters tuned on that preset is left out.  For every agent, on ``test`` as
 on ``varied_test``, the **oracle** (:mod:`abb_gym.baselines.oracle`: ``knots`` tuned by CMA-ES
 on each test machine alone, from the tuned ``knots``) joins the table, and a **feedback-gap**
-table puts the four families side by side: best open loop | closed-loop hand design | PPO |
-oracle.  The oracle's runs are kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and
+table puts the families side by side: best open loop | closed-loop hand design | PPO |
+oracle | oracle, balls unknown (the oracle that knows the machine but not where its balls start:
+``knots`` tuned on each machine, each candidate scored on ``--machine-oracle-draws`` ball starts
+drawn as the preset draws them, kept in ``..._balls_unknown.json``).  The oracle's runs are kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and
 reused while scene, preset, seed, reward, budget and start match, so agents that share them
 (the three yoshida_odd ``train`` agents) share one oracle; a file holds the runs of every
 reward its agents use (``--oracle-budget 0``: no oracle).

@@ -124,6 +124,7 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
     readme.write_text(f"{script.GAP_BEGIN}\n{script.GAP_END}\n")
     (tmp_path / "agents.md").write_text(f"{script.BEGIN}\n{script.END}\n")
     rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "3",
+                      "--machine-oracle-budget", "0", "--elsewhere-draws", "0",
                       "--baselines", "knots", "retry", "--out", str(out),
                       "--readme", str(tmp_path / "agents.md"), "--gap-readme", str(readme)])
     assert rc == 0
@@ -131,6 +132,11 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
         in readme.read_text()
     report = json.loads((out / "runup_speed_yoshida_odd" / "comparison.json").read_text())
     assert report["feedback_gap"]["columns"]["oracle"] == "oracle:knots per machine"
+    # switched off, the oracle with the balls unknown and the replay elsewhere are left out
+    assert "oracle, balls unknown" not in report["feedback_gap"]["columns"]
+    assert set(report["feedback_gap"]["gaps"]) == {
+        "oracle - knots", "PPO - knots", "feedback value (replay - PPO)"}
+    assert not (out / "oracle" / "yoshida_odd_test_seed0_balls_unknown.json").exists()
     # the oracle refined the knots tuned on train (the shipped file), and the run of the
     # other reward is still in the file, untouched, after this agent's run was added
     runs = json.loads(stored.read_text())["runs"]
@@ -167,3 +173,13 @@ def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):
         plot_training_curves({"x": {"timesteps": [1.0], "return": [0.0]}}, tmp_path / "x.png")
     with pytest.raises(ValueError, match="no training curves"):
         plot_training_curves({}, tmp_path / "x.png")
+
+
+@pytest.mark.parametrize("flag", ["--oracle-budget", "--machine-oracle-budget",
+                                  "--machine-oracle-draws", "--elsewhere-draws"])
+def test_a_negative_count_is_refused_by_name(script, tmp_path, capsys, flag):
+    rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", flag, "-1",
+                      "--out", str(tmp_path)])
+    assert rc == 2
+    assert f"{flag} must be >= 0 (got -1)" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # refused before anything ran
