@@ -27,8 +27,9 @@ measures separate that knowledge from the rest: :func:`balls_elsewhere` replays 
 oracle profile with the balls started elsewhere, and :func:`run_oracle` with ``ball_draws``
 searches knowing every parameter of the machine but not the balls (each candidate scored on
 several ball starts, the best then run on the machine as drawn).  On the shipped scenes and
-presets (2026-11-24, README "Feedback gap on machines that differ") the oracle's gain over the
-tuned ``knots`` is almost all the balls' start.
+presets (2026-11-24, README "Feedback gap on machines that differ") the oracle's residual gain
+over the tuned ``knots`` does not survive without the balls' start, and the machine alone is
+worth little more than run-up time.
 """
 from __future__ import annotations
 

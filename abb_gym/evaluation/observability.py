@@ -2,8 +2,8 @@
 measures.
 
 The per-machine oracle (:mod:`abb_gym.baselines.oracle`) plans knowing where each machine's
-balls start, and that knowledge is nearly all of its gain over the best fixed profile.  A
-controller that only watches the drive can use it only if its measurements carry it.  This
+balls start, and without that knowledge its residual gain over the best fixed profile is
+gone.  A controller that only watches the drive can use it only if its measurements carry it.  This
 module measures how much they do: machines of a preset run up under one open-loop policy (the
 tuned ``knots`` by default, so that the measurements do not depend on a learner), and a
 regressor learns, from the environment's observation over the first ``n`` decisions, three
@@ -164,10 +164,12 @@ def ball_start_observability(scene: str = "spannan_cfrp", train_preset: str = "v
                           "'abb-gym[train]'") from exc
     env_kwargs = dict(env_kwargs or {})
     steps = counts[-1]
-    x_tr, _, y_tr, _ = _collect(env_id, scene, train_preset, range(100000, 100000 + train_machines),
-                             policy, steps, env_kwargs, control_seed=(seed, 1))
-    x_te, w_te, y_te, interval = _collect(env_id, scene, test_preset, range(seed, seed + test_machines),
-                                policy, steps, env_kwargs, control_seed=(seed, 2))
+    x_tr, _, y_tr, _ = _collect(env_id, scene, train_preset,
+                                range(100000, 100000 + train_machines), policy, steps,
+                                env_kwargs, control_seed=(seed, 1))
+    x_te, w_te, y_te, interval = _collect(env_id, scene, test_preset,
+                                          range(seed, seed + test_machines), policy, steps,
+                                          env_kwargs, control_seed=(seed, 2))
     rows = []
     rng = np.random.default_rng((seed, 3))
     with tqdm(total=len(counts) * len(TARGETS), desc="observability", unit="fit",
