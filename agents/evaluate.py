@@ -21,10 +21,11 @@ on each test machine alone, from the tuned ``knots``) joins the table, and a **f
 table puts the families side by side: best open loop | closed-loop hand design | PPO |
 oracle | oracle, balls unknown (the oracle that knows the machine but not where its balls start:
 ``knots`` tuned on each machine, each candidate scored on ``--machine-oracle-draws`` ball starts
-drawn as the preset draws them, kept in ``..._balls_unknown.json``).  The oracle's runs are kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and
-reused while scene, preset, seed, reward, budget and start match, so agents that share them
-(the three yoshida_odd ``train`` agents) share one oracle; a file holds the runs of every
-reward its agents use (``--oracle-budget 0``: no oracle).
+drawn as the preset draws them, kept in ``..._balls_unknown.json``).  The oracle's runs are
+kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and reused while scene, preset,
+seed, reward, budget and start match, so agents that share them (the three yoshida_odd
+``train`` agents) share one oracle; a file holds the runs of every reward its agents use
+(``--oracle-budget 0``: no oracle).
 
 The oracle plans on each machine as drawn, the balls' initial angles included, which no drive
 measures.  The gap section therefore also replays each machine's oracle profile, and the tuned
@@ -75,6 +76,7 @@ FEEDBACK_GOAL = 0.10   # the replay at least 10 % worse than the agent
 BEGIN, END = "<!-- comparison:begin -->", "<!-- comparison:end -->"
 GAP_BEGIN, GAP_END = "<!-- feedback-gap:begin -->", "<!-- feedback-gap:end -->"
 TRAINING_BEGIN, TRAINING_END = "<!-- training:begin -->", "<!-- training:end -->"
+PAIRED_METRICS = ("return", "residual_vibration", "run_up_time")
 GAP_COLUMNS = ("best open loop", "closed loop, hand-designed", "PPO (drive measurements)",
                "oracle", "oracle, balls unknown")
 
@@ -242,6 +244,12 @@ def oracle_run(setting: AgentSetting, args, ball_draws: int = 0) -> dict:
     return best_of_runs(runs)
 
 
+def paired_gaps(a, b) -> dict:
+    """The paired differences ``a - b`` of :data:`PAIRED_METRICS`, machine by machine."""
+    from abb_gym.evaluation.report import paired_gap
+    return {k: paired_gap(a, b, k) for k in PAIRED_METRICS}
+
+
 def _env_note(columns: dict) -> str:
     """A sentence naming the environments when the table's families ran on different ones
     (the oracle plans speed profiles on RunUpSpeed; the torque agent's baselines run on
@@ -262,7 +270,6 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
     ``train`` agents share it)."""
     from abb_gym.baselines.baseline_policy import tuned_parameters
     from abb_gym.baselines.oracle import balls_elsewhere
-    from abb_gym.evaluation.report import paired_gap
     key = (setting.scene, setting.preset, args.seed, args.episodes, args.elsewhere_draws,
            json.dumps(setting.env_kwargs, sort_keys=True))
     if key not in _ELSEWHERE:
@@ -270,8 +277,7 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
               f"with the balls started elsewhere ({args.elsewhere_draws} draws)", flush=True)
         oracle, knots = balls_elsewhere(run, tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP),
                                         args.elsewhere_draws, args.episodes)
-        _ELSEWHERE[key] = {k: paired_gap(oracle, knots, k)
-                           for k in ("return", "residual_vibration", "run_up_time")}
+        _ELSEWHERE[key] = paired_gaps(oracle, knots)
     return _ELSEWHERE[key]
 
 
@@ -281,7 +287,7 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
     the oracle - knots gap with the balls started elsewhere (:func:`elsewhere_gap`);
     ``unknown``: the oracle that knows the machine but not its balls (a fifth column)."""
     from abb_gym.evaluation.replay import feedback_value
-    from abb_gym.evaluation.report import family_table, paired_gap
+    from abb_gym.evaluation.report import family_table
     ppo, replay = by_spec[ppo_spec], by_spec[f"replay:{ppo_spec}"]
     knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
     closed = [by_spec[f"baseline:{b}"] for b in CLOSED_LOOP if f"baseline:{b}" in by_spec]
@@ -289,15 +295,11 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
     columns = dict(zip(GAP_COLUMNS, (knots, best_closed, ppo, oracle, unknown)))
     if unknown is None:
         del columns[GAP_COLUMNS[-1]]
-    gaps = {"oracle - knots": {k: paired_gap(oracle, knots, k)
-                               for k in ("return", "residual_vibration", "run_up_time")},
-            "PPO - knots": {k: paired_gap(ppo, knots, k)
-                            for k in ("return", "residual_vibration", "run_up_time")},
+    gaps = {"oracle - knots": paired_gaps(oracle, knots),
+            "PPO - knots": paired_gaps(ppo, knots),
             "feedback value (replay - PPO)": feedback_value(ppo.episodes, replay.episodes)}
     if unknown is not None:
-        gaps["oracle, balls unknown - knots"] = {
-            k: paired_gap(unknown, knots, k)
-            for k in ("return", "residual_vibration", "run_up_time")}
+        gaps["oracle, balls unknown - knots"] = paired_gaps(unknown, knots)
     if elsewhere is not None:
         gaps[f"oracle - knots, balls started elsewhere ({args.elsewhere_draws} draws per "
              f"machine, both on the same draws)"] = elsewhere
@@ -320,7 +322,7 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
     for name, gap in gaps.items():
         text += f"- {name}: " + ", ".join(
             f"{k} {_cell(v)}" for k, v in gap.items()
-            if k in ("return", "residual_vibration", "run_up_time")) + "\n"
+            if k in PAIRED_METRICS) + "\n"
     return text, {"columns": {k: r.policy for k, r in columns.items()}, "gaps": gaps}
 
 
@@ -467,14 +469,11 @@ def main(argv=None) -> int:
         if args.episodes < 2:
             raise ValueError(f"--episodes must be >= 2 for confidence intervals "
                              f"(got {args.episodes})")
-        if args.oracle_budget < 0:
-            raise ValueError(f"--oracle-budget must be >= 0 (got {args.oracle_budget})")
-        for flag in ("machine_oracle_budget", "machine_oracle_draws"):
+        for flag in ("oracle_budget", "machine_oracle_budget", "machine_oracle_draws",
+                     "elsewhere_draws"):
             if getattr(args, flag) < 0:
                 raise ValueError(f"--{flag.replace('_', '-')} must be >= 0 "
                                  f"(got {getattr(args, flag)})")
-        if args.elsewhere_draws < 0:
-            raise ValueError(f"--elsewhere-draws must be >= 0 (got {args.elsewhere_draws})")
         for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):
             if path is not None and not path.is_file():
                 raise ValueError(f"{flag} {path} is not a file")

@@ -17,10 +17,11 @@ charts treat the oracle like any evaluated policy.
 The per-machine search is local and short (60 candidates by default): it stays in the basin of
 its start.  When the tuned profile moved to another basin (the spannan_cfrp ``knots`` re-tuned
 with restarts on 2026-11-23 waited 47 s instead of 40 s), an oracle refining only it fell below
-a PPO agent in return, which an upper bound must not.  :func:`best_of_runs` therefore takes, machine by
-machine, the best of runs from several starts (the tuned profile and the earlier tunings a
-baselines file lists as ``oracle_starts``): every run is a search on the same machine, so the
-best of them is still what a planner that knows the machine reaches with this family.
+a PPO agent in return, which an upper bound must not.  :func:`best_of_runs` therefore takes,
+machine by machine, the best of runs from several starts (the tuned profile and the earlier
+tunings a baselines file lists as ``oracle_starts``): every run is a search on the same
+machine, so the best of them is still what a planner that knows the machine reaches with this
+family.
 
 Knowing the machine includes knowing where its balls start, which no drive measures.  Two
 measures separate that knowledge from the rest: :func:`balls_elsewhere` replays each machine's
@@ -41,8 +42,8 @@ import numpy as np
 from tqdm import tqdm
 
 from ..evaluation.evaluate import EvaluationResult
-from .tuner import (ENV_ID, CandidateTask, _run_candidates, ball_starts, return_score,
-                    tune_per_machine)
+from .tuner import (ENV_ID, CandidateTask, _check_counts, _run_candidates, as_candidate,
+                    ball_starts, return_score, tune_per_machine)
 
 __all__ = ["run_oracle", "oracle_result", "oracle_matches", "oracle_name", "best_of_runs",
            "balls_elsewhere"]
@@ -161,8 +162,7 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     the share that settled; the residual over the draws that settled, NaN if none did), so that
     :func:`abb_gym.evaluation.report.paired_gap` pairs them machine by machine."""
     from ..envs.setup import EnvSetup
-    if isinstance(draws, bool) or not isinstance(draws, (int, np.integer)) or draws < 1:
-        raise ValueError(f"draws must be an integer >= 1 (got {draws!r})")
+    _check_counts(draws=draws)
     machines = run["machines"] if episodes is None else run["machines"][:episodes]
     env_kwargs = run.get("env_kwargs") or {}
     setup = EnvSetup("speed", run["scene"], run["preset"], overrides=env_kwargs)
@@ -175,7 +175,7 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
               unit="run-up pair", disable=not progress) as bar:
         for row in machines:
             k = int(row["episode"])
-            profiles = (_as_candidate(row["params"]), _as_candidate(compare))
+            profiles = (as_candidate(row["params"]), as_candidate(compare))
             scored = [[], []]
             for options in ball_starts(setup, int(run["seed"]) + k, BALLS_ELSEWHERE_STREAM,
                                        draws):
@@ -188,11 +188,6 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
             for result, rows in zip(results, scored):
                 result.episodes.append(_mean_row(rows, k, result.policy))
     return results
-
-
-def _as_candidate(params: dict[str, Any]) -> tuple:
-    return tuple(sorted((key, tuple(v) if isinstance(v, list) else v)
-                        for key, v in params.items()))
 
 
 def _mean_row(rows: list[dict[str, Any]], episode: int, policy: str) -> dict[str, Any]:

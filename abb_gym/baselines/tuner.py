@@ -108,6 +108,12 @@ def unit_from_params(family: str, params: dict[str, Any], scales: dict[str, floa
     return np.clip(np.array(x, dtype=float), 0.0, 1.0)
 
 
+def as_candidate(params: dict[str, Any]) -> tuple:
+    """Family parameters as a :class:`CandidateTask` candidate: sorted (name, value) pairs,
+    lists as tuples, so that tasks stay hashable."""
+    return tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in params.items()))
+
+
 @dataclass(frozen=True)
 class CandidateTask:
     """Candidates x episodes of one family as one vector environment."""
@@ -174,8 +180,7 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
     for c in candidates:
         build_family(family, **c)  # validate every candidate before any runs
     per = max(1, per_task // (episodes * len(option_sets)))
-    cand = [tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in c.items()))
-            for c in candidates]
+    cand = [as_candidate(c) for c in candidates]
     kw = tuple(sorted((env_kwargs or {}).items()))
     tasks = [CandidateTask(env_id, scene_name, preset, family, tuple(cand[a:a + per]),
                            tuple(range(episodes)), seed, kw, options)
@@ -455,8 +460,7 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
             _shrink_bar(bar, budget, n)
             # the search keeps means of a few metrics; the best candidate's episode once more
             # (deterministic: the same numbers) gives all of them
-            params = tuple(sorted((key, tuple(v) if isinstance(v, list) else v)
-                                  for key, v in best["params"].items()))
+            params = as_candidate(best["params"])
             (row,) = _run_candidates(CandidateTask(env_id, scene_name, preset, family,
                                                    (params,), (0,), seed + k, kw))
             del row["candidate"]
