@@ -77,6 +77,7 @@ BEGIN, END = "<!-- comparison:begin -->", "<!-- comparison:end -->"
 GAP_BEGIN, GAP_END = "<!-- feedback-gap:begin -->", "<!-- feedback-gap:end -->"
 TRAINING_BEGIN, TRAINING_END = "<!-- training:begin -->", "<!-- training:end -->"
 PAIRED_METRICS = ("return", "residual_vibration", "run_up_time")
+ROOM_METRICS = ("residual_vibration", "run_up_time")
 GAP_COLUMNS = ("best open loop", "closed loop, hand-designed", "PPO (drive measurements)",
                "oracle", "oracle, balls unknown")
 
@@ -198,7 +199,16 @@ def configs_folder(folder: Path | None):
     return mock.patch.dict(os.environ, {} if folder is None else {ENV_VAR: str(folder)})
 
 
-def oracle_run(setting: AgentSetting, args, ball_draws: int = 0) -> dict:
+def scaled_residual(env_kwargs: dict, factor: float) -> dict:
+    """``env_kwargs`` with the reward's residual weight multiplied by ``factor``."""
+    from abb_gym.envs.config import RewardWeights
+    reward = dict(env_kwargs.get("reward", {}))
+    reward["residual"] = float(reward.get("residual", RewardWeights().residual)) * factor
+    return {**env_kwargs, "reward": reward}
+
+
+def oracle_run(setting: AgentSetting, args, ball_draws: int = 0,
+               residual_factor: float = 1.0) -> dict:
     """The oracle of the agent's test machines: machine by machine the best of the per-machine
     searches from each start (the tuned knots, then the ``oracle_starts`` of its baselines
     file; :func:`abb_gym.baselines.oracle.best_of_runs`).  Each start's run is reused from
@@ -206,15 +216,19 @@ def oracle_run(setting: AgentSetting, args, ball_draws: int = 0) -> dict:
     candidates) and stored.  With ``ball_draws`` > 0 the oracle that knows the machine but not
     where its balls start (``--machine-oracle-budget`` candidates, each scored on
     ``ball_draws`` ball starts; from the tuned knots only, since each candidate costs
-    ``ball_draws`` run-ups), kept in ``..._balls_unknown.json``."""
+    ``ball_draws`` run-ups), kept in ``..._balls_unknown.json``.  With ``residual_factor``
+    != 1 the oracle of the agent's reward with its residual weight scaled (from the tuned knots
+    only), kept in the oracle's file beside the agent's own reward."""
     from abb_gym.baselines.baseline_policy import oracle_starts, tuned_parameters
     from abb_gym.baselines.oracle import best_of_runs, oracle_matches, run_oracle
     suffix = "_balls_unknown" if ball_draws else ""
     path = (Path(args.out) / "oracle"
             / f"{setting.scene}_{setting.preset}_seed{args.seed}{suffix}.json")
     budget = args.machine_oracle_budget if ball_draws else args.oracle_budget
+    env_kwargs = (setting.env_kwargs if residual_factor == 1
+                  else scaled_residual(setting.env_kwargs, residual_factor))
     starts = [tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP)]
-    if not ball_draws:
+    if not ball_draws and residual_factor == 1:
         starts += oracle_starts(setting.scene, STRONGEST_OPEN_LOOP)
     stored = []
     if path.is_file():
@@ -224,21 +238,22 @@ def oracle_run(setting: AgentSetting, args, ball_draws: int = 0) -> dict:
     for k, start in enumerate(starts):
         run = next((r for r in stored if oracle_matches(
             r, setting.scene, setting.preset, args.seed, args.episodes, budget,
-            setting.env_kwargs, start=start, ball_draws=ball_draws)), None)
+            env_kwargs, start=start, ball_draws=ball_draws)), None)
         if run is not None:
             print(f"oracle: reusing start {k + 1} of {len(starts)} from {path}", flush=True)
         else:
             unknown = f", each on {ball_draws} ball starts" if ball_draws else ""
+            reward = "" if residual_factor == 1 else f", reward {env_kwargs['reward']}"
             print(f"oracle: tuning knots on each of {args.episodes} machines "
-                  f"({budget} candidates each{unknown}, start {k + 1} of {len(starts)}) "
-                  f"-> {path}", flush=True)
+                  f"({budget} candidates each{unknown}{reward}, start {k + 1} of "
+                  f"{len(starts)}) -> {path}", flush=True)
             run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
-                             budget, env_kwargs=setting.env_kwargs, start=start,
+                             budget, env_kwargs=env_kwargs, start=start,
                              ball_draws=ball_draws)
             computed = True
         runs.append(run)
     if computed:  # another reward's runs (another agent's oracle) stay in the file
-        kept = runs + [r for r in stored if r.get("env_kwargs") != setting.env_kwargs]
+        kept = runs + [r for r in stored if r.get("env_kwargs") != env_kwargs]
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"runs": kept}, indent=1, default=float))
     return best_of_runs(runs)
@@ -281,11 +296,62 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
     return _ELSEWHERE[key]
 
 
+def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict) -> dict:
+    """The goal's room on the agent's test machines: the oracle again at each of
+    ``--room-factors`` times the agent's residual weight (:func:`oracle_run`), and the least
+    residual that the runs of the oracle (``run``, the best of its starts, and those) and
+    ``knots`` reach together at a mean run-up no longer than knots'
+    (:func:`abb_gym.baselines.oracle.goal_room`).  Returns ``{"frontier": [(weight, result),
+    ...], "room": result, "knots": result}``."""
+    from abb_gym.baselines.oracle import goal_room, oracle_result
+    runs, frontier = [run], []
+    for factor in args.room_factors:
+        scaled = oracle_run(setting, args, residual_factor=factor)
+        runs.append(scaled)
+        frontier.append((scaled["env_kwargs"]["reward"]["residual"],
+                         oracle_result(scaled, args.episodes)))
+    knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
+    room = goal_room(knots, [dict(r, machines=r["machines"][:args.episodes]) for r in runs])
+    return {"frontier": frontier, "room": room, "knots": knots}
+
+
+def room_points(room: dict) -> list[dict]:
+    """The goal's room as points of the report's chart of residual against run-up time."""
+    points = []
+    for label, result in ([(f"oracle at residual weight {w:g}", r) for w, r in room["frontier"]]
+                          + [("goal room: least residual at knots' run-up time",
+                              room["room"])]):
+        s = result.summary()
+        points.append({"family": label, "label": label, "at_speed": s["at_speed"]["mean"],
+                       **{k: s[k]["mean"] for k in ("run_up_time", "residual_vibration")}})
+    return points
+
+
+def room_lines(room: dict) -> dict:
+    """The paired gaps (residual, run-up; not the return, which is at other weights) of the
+    oracle at each scaled weight and of the goal's room against knots."""
+    from abb_gym.evaluation.report import paired_gap
+    knots = room["knots"]
+    lines = {f"oracle at residual weight {w:g} - knots": {
+        k: paired_gap(r, knots, k) for k in ROOM_METRICS} for w, r in room["frontier"]}
+    k_mean = knots.summary()["residual_vibration"]["mean"]
+    r_mean = room["room"].summary()["residual_vibration"]["mean"]
+    weights = ", ".join(f"{w:g}" for w, _ in room["frontier"])
+    lines[f"goal room - knots (per machine the least residual of knots, the oracle and the "
+          f"oracle at residual weights {weights}, at a mean run-up no longer than knots': "
+          f"{r_mean:.4g} against {k_mean:.4g} W_r/e, {100 * (r_mean / k_mean - 1):+.0f} %; "
+          f"the goal asks -20 %)"] = {k: paired_gap(room["room"], knots, k)
+                                      for k in ROOM_METRICS}
+    return lines
+
+
 def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, args,
-                elsewhere: dict | None = None, unknown=None) -> tuple[str, dict]:
+                elsewhere: dict | None = None, unknown=None, room: dict | None = None
+                ) -> tuple[str, dict]:
     """The feedback-gap table (the families side by side) and its paired gaps; ``elsewhere``:
     the oracle - knots gap with the balls started elsewhere (:func:`elsewhere_gap`);
-    ``unknown``: the oracle that knows the machine but not its balls (a fifth column)."""
+    ``unknown``: the oracle that knows the machine but not its balls (a fifth column);
+    ``room``: the goal's room (:func:`goal_room_of`)."""
     from abb_gym.evaluation.replay import feedback_value
     from abb_gym.evaluation.report import family_table
     ppo, replay = by_spec[ppo_spec], by_spec[f"replay:{ppo_spec}"]
@@ -303,6 +369,8 @@ def gap_section(setting: AgentSetting, by_spec: dict, ppo_spec: str, oracle, arg
     if elsewhere is not None:
         gaps[f"oracle - knots, balls started elsewhere ({args.elsewhere_draws} draws per "
              f"machine, both on the same draws)"] = elsewhere
+    if room is not None:
+        gaps.update(room_lines(room))
     reward = setting.env_kwargs.get("reward", {})
     text = (f"#### Feedback gap: {setting.scene}, {setting.preset} "
             f"({setting.env_id.split('/')[-1]}, trained on {setting.train_preset})\n\n"
@@ -339,7 +407,8 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
         specs = [ppo_spec, f"replay:{ppo_spec}"] + [f"baseline:{b}" for b in baselines]
         results = [evaluate(setting.env_id, setting.scene, spec, args.episodes, args.seed,
                             setting.preset, **setting.env_kwargs) for spec in specs]
-        oracle = elsewhere = unknown = None
+        by_spec = dict(zip(specs, results))
+        oracle = elsewhere = unknown = room = None
         if args.oracle_budget > 0 and STRONGEST_OPEN_LOOP in baselines:
             run = oracle_run(setting, args)
             oracle = oracle_result(run, args.episodes)
@@ -348,10 +417,11 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
             if args.machine_oracle_draws > 0 and args.machine_oracle_budget > 0:
                 unknown = oracle_result(oracle_run(setting, args, args.machine_oracle_draws),
                                         args.episodes)
+            if args.room_factors:
+                room = goal_room_of(setting, args, run, by_spec)
     shown = results + [r for r in (oracle, unknown) if r is not None]
     out = Path(args.out) / setting.folder.name
-    write_report(shown, out)
-    by_spec = dict(zip(specs, results))
+    write_report(shown, out, room_points(room) if room else None)
     check = {}
     if STRONGEST_OPEN_LOOP in baselines:
         check = goal_check(results[0], results[1], by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"])
@@ -366,7 +436,7 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
     gap_text, gap = "", {}
     if oracle is not None:
         gap_text, gap = gap_section(setting, by_spec, ppo_spec, oracle, args, elsewhere,
-                                    unknown)
+                                    unknown, room)
         text += "\n" + gap_text
     report = {"agent": setting.folder.name, "env_id": setting.env_id, "scene": setting.scene,
               "episodes": args.episodes, "seed": args.seed, "preset": setting.preset,
@@ -450,6 +520,11 @@ def main(argv=None) -> int:
     p.add_argument("--elsewhere-draws", type=int, default=4,
                    help="ball-angle draws per machine on which the oracle's profiles and knots "
                         "run again with the balls started elsewhere (0: not measured)")
+    p.add_argument("--room-factors", type=float, nargs="*", default=[3.0, 10.0],
+                   help="the oracle again at these multiples of the agent's residual weight "
+                        "(from the tuned knots), for the goal's room: the least residual a "
+                        "planner that knows each machine reaches at knots' run-up time (no "
+                        "value: not measured)")
     p.add_argument("--out", default="agents/results", help="report folder")
     p.add_argument("--readme", type=Path, default=None,
                    help="regenerate the comparison section of this Markdown file (default "
@@ -474,6 +549,10 @@ def main(argv=None) -> int:
             if getattr(args, flag) < 0:
                 raise ValueError(f"--{flag.replace('_', '-')} must be >= 0 "
                                  f"(got {getattr(args, flag)})")
+        for factor in args.room_factors:
+            if not factor > 0 or factor == 1 or factor > 1e4:
+                raise ValueError(f"--room-factors must lie in (0, 10000] and differ from 1 "
+                                 f"(the agent's own weight is the oracle's; got {factor})")
         for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):
             if path is not None and not path.is_file():
                 raise ValueError(f"{flag} {path} is not a file")

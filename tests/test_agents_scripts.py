@@ -50,7 +50,8 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     out = tmp_path / "results"
     rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
                       "3", "--elsewhere-draws", "2", "--machine-oracle-budget", "3",
-                      "--machine-oracle-draws", "2", "--baselines", "knots", "retry",
+                      "--machine-oracle-draws", "2", "--room-factors", "3",
+                      "--baselines", "knots", "retry",
                       "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
                       "--gap-readme", str(readme)])
     assert rc == 0
@@ -71,9 +72,19 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     assert columns["oracle"] == "oracle:knots per machine"
     elsewhere = ("oracle - knots, balls started elsewhere (2 draws per machine, both on the "
                  "same draws)")
-    assert set(report["feedback_gap"]["gaps"]) == {
+    gaps = report["feedback_gap"]["gaps"]
+    (room,) = [k for k in gaps if k.startswith("goal room - knots")]
+    assert set(gaps) == {
         "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere,
-        "oracle, balls unknown - knots"}
+        "oracle, balls unknown - knots", "oracle at residual weight 18 - knots", room}
+    # the goal's room: the oracle again at 3 x the agent's weight 6, its return (at another
+    # weight) left out; the room holds the run-up time to knots' and never leaves more residual
+    for key in ("oracle at residual weight 18 - knots", room):
+        assert set(gaps[key]) == {"residual_vibration", "run_up_time"}
+        assert f"- {key}: residual_vibration " in gap
+    assert gaps[room]["run_up_time"]["mean"] <= 1e-9
+    assert gaps[room]["residual_vibration"]["mean"] <= 0.0
+    assert "the goal asks -20 %" in room
     assert columns["oracle, balls unknown"] == "oracle:knots per machine, balls unknown"
     (unknown,) = json.loads((out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json"
                              ).read_text())["runs"]
@@ -104,9 +115,14 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
         run = script.oracle_run(setting, args)
     assert "reusing" in capsys.readouterr().out and stored.stat().st_mtime_ns == before
     assert len(run["machines"]) == 2
-    # one run per start: the tuned knots and the earlier tuning the varied file lists
-    runs = json.loads(stored.read_text())["runs"]
+    # one run per start: the tuned knots and the earlier tuning the varied file lists; beside
+    # them the run at 3 x the residual weight, from the tuned knots only
+    every = json.loads(stored.read_text())["runs"]
+    runs = [r for r in every if r["env_kwargs"] == setting.env_kwargs]
     assert len(runs) == len(run["starts"]) == 2 and run["starts"][0] == tuned
+    (scaled,) = [r for r in every if r not in runs]
+    assert scaled["env_kwargs"] == {"reward": {"residual": 18.0}}
+    assert scaled["start"] == tuned and len(scaled["machines"]) == 2
     for k, row in enumerate(run["machines"]):
         assert row["return"] == max(r["machines"][k]["return"] for r in runs)
 
@@ -125,14 +141,15 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
     (tmp_path / "agents.md").write_text(f"{script.BEGIN}\n{script.END}\n")
     rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "3",
                       "--machine-oracle-budget", "0", "--elsewhere-draws", "0",
-                      "--baselines", "knots", "retry", "--out", str(out),
+                      "--room-factors", "--baselines", "knots", "retry", "--out", str(out),
                       "--readme", str(tmp_path / "agents.md"), "--gap-readme", str(readme)])
     assert rc == 0
     assert "#### Feedback gap: yoshida_odd, test (RunUpSpeed-v0, trained on train)" \
         in readme.read_text()
     report = json.loads((out / "runup_speed_yoshida_odd" / "comparison.json").read_text())
     assert report["feedback_gap"]["columns"]["oracle"] == "oracle:knots per machine"
-    # switched off, the oracle with the balls unknown and the replay elsewhere are left out
+    # switched off, the oracle with the balls unknown, the replay elsewhere and the goal's
+    # room are left out
     assert "oracle, balls unknown" not in report["feedback_gap"]["columns"]
     assert set(report["feedback_gap"]["gaps"]) == {
         "oracle - knots", "PPO - knots", "feedback value (replay - PPO)"}
@@ -182,4 +199,13 @@ def test_a_negative_count_is_refused_by_name(script, tmp_path, capsys, flag):
                       "--out", str(tmp_path)])
     assert rc == 2
     assert f"{flag} must be >= 0 (got -1)" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # refused before anything ran
+
+
+@pytest.mark.parametrize("factor", ["1", "0", "-2", "nan", "1e5"])
+def test_a_room_factor_out_of_range_is_refused_by_name(script, tmp_path, capsys, factor):
+    rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--room-factors", "3",
+                      factor, "--out", str(tmp_path)])
+    assert rc == 2
+    assert "--room-factors must lie in (0, 10000] and differ from 1" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # refused before anything ran

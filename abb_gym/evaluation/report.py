@@ -14,7 +14,9 @@
   residual vibration; a family keeps one colour whether swept (small points) or evaluated
   (large markers with 95 % intervals); policies that did not complete every run-up are drawn
   hollow with their success share, and swept points that failed are left out of the Pareto
-  front; the legend sits outside the data.
+  front; points that carry a ``label`` of their own (``agents/evaluate.py``'s oracle at other
+  residual weights and the goal's room) are drawn as stars under that label; the legend sits
+  outside the data.
 """
 from __future__ import annotations
 
@@ -193,8 +195,12 @@ def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path) ->
         fs = [s for s in sweep if s["family"] == fam]
         ok = [s for s in fs if s.get("at_speed", 1.0) >= 1.0]
         bad = [s for s in fs if s.get("at_speed", 1.0) < 1.0]
-        ax.scatter([s["run_up_time"] for s in ok], [s["residual_vibration"] for s in ok], s=16,
-                   alpha=0.5, color=colour[fam], label=f"{fam}: swept")
+        named = "label" in fs[0]  # points of their own (the goal's room), not a sweep
+        ax.scatter([s["run_up_time"] for s in ok], [s["residual_vibration"] for s in ok],
+                   s=90 if named else 16, marker="*" if named else "o",
+                   alpha=1.0 if named else 0.5, color=colour[fam],
+                   edgecolors="k" if named else "none",
+                   label=fs[0]["label"] if named else f"{fam}: swept")
         if bad:
             ax.scatter([s["run_up_time"] for s in bad], [s["residual_vibration"] for s in bad],
                        s=16, alpha=0.5, facecolors="none", edgecolors=colour[fam])
