@@ -520,7 +520,7 @@ def main(argv=None) -> int:
     p.add_argument("--elsewhere-draws", type=int, default=4,
                    help="ball-angle draws per machine on which the oracle's profiles and knots "
                         "run again with the balls started elsewhere (0: not measured)")
-    p.add_argument("--room-factors", type=float, nargs="*", default=[3.0, 10.0],
+    p.add_argument("--room-factors", type=float, nargs="*", default=[3.0],
                    help="the oracle again at these multiples of the agent's residual weight "
                         "(from the tuned knots), for the goal's room: the least residual a "
                         "planner that knows each machine reaches at knots' run-up time (no "
