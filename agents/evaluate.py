@@ -34,6 +34,16 @@ machine, drawn as the preset draws them: :func:`abb_gym.baselines.oracle.balls_e
 what is left of the oracle's gain there did not come from knowing where the balls start
 (``--elsewhere-draws 0``: not measured).
 
+The oracle plans at the agent's reward, which trades residual against run-up time at its
+weights; the goal below asks for less residual at no longer run-up time.  The **goal's room**
+answers how much of that a planner that knows each machine can have: the oracle again at
+``--room-factors`` times the agent's residual weight (from the tuned ``knots``, kept in the
+oracle's file), then per machine the least residual among ``knots``, the oracle and those runs
+at a mean settled run-up no longer than knots' (:func:`abb_gym.baselines.oracle.goal_room`).
+Its lines give residual and run-up time against ``knots``, not the return (the runs' returns
+are at other weights); ``pareto.png`` shows them as stars (``--room-factors`` with no value:
+not measured).
+
 On DwellProfile, the baselines its one action cannot express (every one above after tuning,
 since they carry their own run-up acceleration) run on RunUpSpeed, on the same machines
 (:func:`abb_gym.evaluation.evaluate.policy_env_id`); the tables mark the environment.

@@ -108,11 +108,17 @@ def test_a_baseline_without_a_run_up_time_is_refused_by_name():
 
 
 if st is not None:
-    _point = st.tuples(st.floats(0.01, 1.0), st.floats(1.0, 10.0))
+    def _cases(point, machines, runs):
+        """A baseline of ``machines`` points and ``runs`` oracle runs on the same machines."""
+        return st.integers(1, machines).flatmap(lambda n: st.tuples(
+            st.lists(point, min_size=n, max_size=n),
+            st.lists(st.lists(point, min_size=n, max_size=n), min_size=1, max_size=runs)))
 
-    @given(st.integers(1, 4).flatmap(lambda n: st.tuples(
-        st.lists(_point, min_size=n, max_size=n),
-        st.lists(st.lists(_point, min_size=n, max_size=n), min_size=1, max_size=2))))
+    _anywhere = st.tuples(st.floats(0.01, 1.0), st.floats(1.0, 10.0))
+    # run-up times in steps of 10 ms: the selection's rounding of time changes loses nothing
+    _on_grid = st.tuples(st.floats(0.01, 1.0), st.integers(100, 1000).map(lambda t: t / 100))
+
+    @given(_cases(_anywhere, 4, 2))
     def test_feasible_and_never_better_than_brute_force(case):
         base, runs = case
         room = goal_room(_baseline(base), [_run(r) for r in runs])
@@ -124,13 +130,8 @@ if st is not None:
             options = [base[k]] + [r[k] for r in runs]
             assert (e["residual_vibration"], e["run_up_time"]) in options
 
-    _on_grid = st.tuples(st.floats(0.01, 1.0), st.integers(100, 1000).map(lambda t: t / 100))
-
-    @given(st.integers(1, 5).flatmap(lambda n: st.tuples(
-        st.lists(_on_grid, min_size=n, max_size=n),
-        st.lists(st.lists(_on_grid, min_size=n, max_size=n), min_size=1, max_size=3))))
+    @given(_cases(_on_grid, 5, 3))
     def test_the_exact_optimum_when_run_up_times_lie_on_a_grid(case):
-        # times in steps of 10 ms: the selection's rounding of time changes loses nothing
         base, runs = case
         room = goal_room(_baseline(base), [_run(r) for r in runs])
         assert _mean(room, "residual_vibration") == pytest.approx(_exact(base, runs),
