@@ -51,7 +51,7 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
                       "3", "--elsewhere-draws", "2", "--machine-oracle-budget", "3",
                       "--machine-oracle-draws", "2", "--room-factors", "3",
-                      "--baselines", "knots", "retry",
+                      "--room-budget", "2", "--baselines", "knots", "retry",
                       "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
                       "--gap-readme", str(readme)])
     assert rc == 0
@@ -85,6 +85,7 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     assert gaps[room]["run_up_time"]["mean"] <= 1e-9
     assert gaps[room]["residual_vibration"]["mean"] <= 0.0
     assert "the goal asks -20 %" in room
+    assert "residual weight 18 (2 candidates from the tuned knots), at" in room
     assert columns["oracle, balls unknown"] == "oracle:knots per machine, balls unknown"
     (unknown,) = json.loads((out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json"
                              ).read_text())["runs"]
@@ -123,6 +124,7 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     (scaled,) = [r for r in every if r not in runs]
     assert scaled["env_kwargs"] == {"reward": {"residual": 18.0}}
     assert scaled["start"] == tuned and len(scaled["machines"]) == 2
+    assert scaled["budget"] == 2 and all(r["budget"] == 3 for r in runs)
     for k, row in enumerate(run["machines"]):
         assert row["return"] == max(r["machines"][k]["return"] for r in runs)
 
@@ -200,6 +202,14 @@ def test_a_negative_count_is_refused_by_name(script, tmp_path, capsys, flag):
     assert rc == 2
     assert f"{flag} must be >= 0 (got -1)" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # refused before anything ran
+
+
+def test_a_room_budget_below_one_is_refused_by_name(script, tmp_path, capsys):
+    rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--room-budget", "0",
+                      "--out", str(tmp_path)])
+    assert rc == 2
+    assert "--room-budget must be >= 1 (got 0)" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
 
 
 @pytest.mark.parametrize("factor", ["1", "0", "-2", "nan", "1e5"])
