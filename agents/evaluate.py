@@ -40,9 +40,11 @@ answers how much of that a planner that knows each machine can have: the oracle 
 ``--room-factors`` times the agent's residual weight (from the tuned ``knots``, kept in the
 oracle's file), then per machine the least residual among ``knots``, the oracle and those runs
 at a mean settled run-up no longer than knots' (:func:`abb_gym.baselines.oracle.goal_room`).
-Its lines give residual and run-up time against ``knots``, not the return (the runs' returns
-are at other weights); ``pareto.png`` shows them as stars (``--room-factors`` with no value:
-not measured).
+The same for the oracle with the balls unknown (at the same weights, with its own budget and
+draws) gives the room of a planner that knows the machine but not where its balls start.  The
+lines give residual and run-up time against ``knots``, not the return (the runs' returns are
+at other weights); ``pareto.png`` shows them as stars (``--room-factors`` with no value: not
+measured).
 
 On DwellProfile, the baselines its one action cannot express (every one above after tuning,
 since they carry their own run-up acceleration) run on RunUpSpeed, on the same machines
@@ -307,23 +309,36 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
     return _ELSEWHERE[key]
 
 
-def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict) -> dict:
+def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict,
+                 unknown_run: dict | None = None) -> dict:
     """The goal's room on the agent's test machines: the oracle again at each of
-    ``--room-factors`` times the agent's residual weight (:func:`oracle_run`), and the least
-    residual that the runs of the oracle (``run``, the best of its starts, and those) and
-    ``knots`` reach together at a mean run-up no longer than knots'
-    (:func:`abb_gym.baselines.oracle.goal_room`).  Returns ``{"frontier": [(weight, result),
-    ...], "room": result, "knots": result}``."""
+    ``--room-factors`` times the agent's residual weight (:func:`oracle_run`, ``--room-budget``
+    candidates), and the least residual that the runs of the oracle (``run``, the best of its
+    starts, and those) and ``knots`` reach together at a mean run-up no longer than knots'
+    (:func:`abb_gym.baselines.oracle.goal_room`).  With ``unknown_run`` (the oracle with the
+    balls unknown) the same for that oracle, at the same weights: the room of a planner that
+    knows the machine but not where its balls start.  Returns ``{"knots": result, "rooms":
+    [room, ...]}``, each room ``{"label", "search", "frontier": [(weight, result), ...],
+    "room": result}``."""
     from abb_gym.baselines.oracle import goal_room, oracle_result
-    runs, frontier = [run], []
-    for factor in args.room_factors:
-        scaled = oracle_run(setting, args, residual_factor=factor)
-        runs.append(scaled)
-        frontier.append((scaled["env_kwargs"]["reward"]["residual"],
-                         oracle_result(scaled, args.episodes)))
     knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
-    room = goal_room(knots, [dict(r, machines=r["machines"][:args.episodes]) for r in runs])
-    return {"frontier": frontier, "room": room, "knots": knots, "budget": room_budget(args)}
+    kinds = [("goal room", run, 0, f"{room_budget(args)} candidates from the tuned knots")]
+    if unknown_run is not None:
+        kinds.append(("goal room, balls unknown", unknown_run, args.machine_oracle_draws,
+                      f"{args.machine_oracle_budget} candidates from the tuned knots, each "
+                      f"on {args.machine_oracle_draws} ball starts"))
+    rooms = []
+    for label, first, draws, search in kinds:
+        runs, frontier = [first], []
+        for factor in args.room_factors:
+            scaled = oracle_run(setting, args, draws, residual_factor=factor)
+            runs.append(scaled)
+            frontier.append((scaled["env_kwargs"]["reward"]["residual"],
+                             oracle_result(scaled, args.episodes)))
+        room = goal_room(knots, [dict(r, machines=r["machines"][:args.episodes])
+                                 for r in runs])
+        rooms.append({"label": label, "search": search, "frontier": frontier, "room": room})
+    return {"knots": knots, "rooms": rooms}
 
 
 def room_budget(args) -> int:
@@ -332,37 +347,47 @@ def room_budget(args) -> int:
     return args.oracle_budget if budget is None else budget
 
 
-def room_points(room: dict) -> list[dict]:
-    """The goal's room as points of the report's chart of residual against run-up time."""
+def _oracle_label(room: dict) -> str:
+    return "oracle" + room["label"][len("goal room"):]
+
+
+def room_points(rooms: dict) -> list[dict]:
+    """The goal's rooms as points of the report's chart of residual against run-up time."""
     points = []
-    for label, result in ([(f"oracle at residual weight {w:g}", r) for w, r in room["frontier"]]
-                          + [("goal room: least residual at knots' run-up time",
-                              room["room"])]):
-        s = result.summary()
-        points.append({"family": label, "label": label, "at_speed": s["at_speed"]["mean"],
-                       **{k: s[k]["mean"] for k in ("run_up_time", "residual_vibration")}})
+    for room in rooms["rooms"]:
+        for label, result in ([(f"{_oracle_label(room)} at residual weight {w:g}", r)
+                               for w, r in room["frontier"]]
+                              + [(f"{room['label']}: least residual at knots' run-up time",
+                                  room["room"])]):
+            s = result.summary()
+            points.append({"family": label, "label": label, "at_speed": s["at_speed"]["mean"],
+                           **{k: s[k]["mean"] for k in ("run_up_time", "residual_vibration")}})
     return points
 
 
-def room_lines(room: dict) -> dict:
-    """The paired gaps (residual, run-up; not the return, which is at other weights) of the
-    oracle at each scaled weight and of the goal's room against knots."""
+def room_lines(rooms: dict) -> dict:
+    """The paired gaps (residual, run-up; not the return, which is at other weights) of each
+    oracle at each scaled weight and of each goal's room against knots."""
     from abb_gym.evaluation.report import paired_gap
-    knots = room["knots"]
-    lines = {f"oracle at residual weight {w:g} - knots": {
-        k: paired_gap(r, knots, k) for k in ROOM_METRICS} for w, r in room["frontier"]}
+    knots = rooms["knots"]
     k_mean = knots.summary()["residual_vibration"]["mean"]
-    r_mean = room["room"].summary()["residual_vibration"]["mean"]
-    gap = {k: paired_gap(room["room"], knots, k) for k in ROOM_METRICS}
-    cut = gap["residual_vibration"]
-    weights = " and ".join(f"{w:g}" for w, _ in room["frontier"])
-    plural = "s" if len(room["frontier"]) > 1 else ""
-    lines[f"goal room - knots (per machine the least residual of knots, the oracle and the "
-          f"oracle at residual weight{plural} {weights} ({room['budget']} candidates from the "
-          f"tuned knots), at a mean run-up no longer than knots': {r_mean:.4g} against "
-          f"{k_mean:.4g} W_r/e, "
-          f"{100 * cut['mean'] / k_mean:+.0f} % [{100 * cut['ci_low'] / k_mean:+.0f}, "
-          f"{100 * cut['ci_high'] / k_mean:+.0f}] of knots' mean; the goal asks -20 %)"] = gap
+    lines = {}
+    for room in rooms["rooms"]:
+        for w, r in room["frontier"]:
+            lines[f"{_oracle_label(room)} at residual weight {w:g} - knots"] = {
+                k: paired_gap(r, knots, k) for k in ROOM_METRICS}
+        r_mean = room["room"].summary()["residual_vibration"]["mean"]
+        gap = {k: paired_gap(room["room"], knots, k) for k in ROOM_METRICS}
+        cut = gap["residual_vibration"]
+        weights = " and ".join(f"{w:g}" for w, _ in room["frontier"])
+        plural = "s" if len(room["frontier"]) > 1 else ""
+        lines[f"{room['label']} - knots (per machine the least residual of knots, the "
+              f"{_oracle_label(room)} and the {_oracle_label(room)} at residual weight{plural} "
+              f"{weights} ({room['search']}), at a mean run-up no longer than knots': "
+              f"{r_mean:.4g} against {k_mean:.4g} W_r/e, "
+              f"{100 * cut['mean'] / k_mean:+.0f} % [{100 * cut['ci_low'] / k_mean:+.0f}, "
+              f"{100 * cut['ci_high'] / k_mean:+.0f}] of knots' mean; the goal asks -20 %)"
+              ] = gap
     return lines
 
 
@@ -435,11 +460,12 @@ def evaluate_agent(agent: str, args) -> tuple[str, str, dict]:
             oracle = oracle_result(run, args.episodes)
             if args.elsewhere_draws > 0:
                 elsewhere = elsewhere_gap(setting, run, args)
+            unknown_run = None
             if args.machine_oracle_draws > 0 and args.machine_oracle_budget > 0:
-                unknown = oracle_result(oracle_run(setting, args, args.machine_oracle_draws),
-                                        args.episodes)
+                unknown_run = oracle_run(setting, args, args.machine_oracle_draws)
+                unknown = oracle_result(unknown_run, args.episodes)
             if args.room_factors:
-                room = goal_room_of(setting, args, run, by_spec)
+                room = goal_room_of(setting, args, run, by_spec, unknown_run)
     shown = results + [r for r in (oracle, unknown) if r is not None]
     out = Path(args.out) / setting.folder.name
     write_report(shown, out, room_points(room) if room else None)

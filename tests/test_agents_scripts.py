@@ -74,21 +74,32 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
                  "same draws)")
     gaps = report["feedback_gap"]["gaps"]
     (room,) = [k for k in gaps if k.startswith("goal room - knots")]
+    (room_unknown,) = [k for k in gaps if k.startswith("goal room, balls unknown - knots")]
+    scaled_lines = ["oracle at residual weight 18 - knots",
+                    "oracle, balls unknown at residual weight 18 - knots"]
     assert set(gaps) == {
         "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere,
-        "oracle, balls unknown - knots", "oracle at residual weight 18 - knots", room}
-    # the goal's room: the oracle again at 3 x the agent's weight 6, its return (at another
-    # weight) left out; the room holds the run-up time to knots' and never leaves more residual
-    for key in ("oracle at residual weight 18 - knots", room):
+        "oracle, balls unknown - knots", *scaled_lines, room, room_unknown}
+    # the goal's rooms: each oracle again at 3 x the agent's weight 6, its return (at another
+    # weight) left out; a room holds the run-up time to knots' and never leaves more residual
+    for key in scaled_lines + [room, room_unknown]:
         assert set(gaps[key]) == {"residual_vibration", "run_up_time"}
         assert f"- {key}: residual_vibration " in gap
-    assert gaps[room]["run_up_time"]["mean"] <= 1e-9
-    assert gaps[room]["residual_vibration"]["mean"] <= 0.0
-    assert "the goal asks -20 %" in room
+    for key in (room, room_unknown):
+        assert gaps[key]["run_up_time"]["mean"] <= 1e-9
+        assert gaps[key]["residual_vibration"]["mean"] <= 0.0
+        assert "the goal asks -20 %" in key
     assert "residual weight 18 (2 candidates from the tuned knots), at" in room
+    assert "residual weight 18 (3 candidates from the tuned knots, each on 2 ball starts)" \
+        in room_unknown
+    (scaled_unknown,) = [r for r in json.loads(
+        (out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json").read_text()
+    )["runs"] if r["env_kwargs"] == {"reward": {"residual": 18.0}}]
+    assert (scaled_unknown["budget"], scaled_unknown["ball_draws"]) == (3, 2)
     assert columns["oracle, balls unknown"] == "oracle:knots per machine, balls unknown"
-    (unknown,) = json.loads((out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json"
-                             ).read_text())["runs"]
+    (unknown,) = [r for r in json.loads(
+        (out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json").read_text()
+    )["runs"] if r["env_kwargs"] == {"reward": {"residual": 6.0}}]
     assert unknown["ball_draws"] == 2 and unknown["budget"] == 3
     assert len(unknown["machines"]) == 2
     # paired machine by machine: one pair per test machine, whatever the draws
