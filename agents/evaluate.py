@@ -318,8 +318,8 @@ def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict,
     (:func:`abb_gym.baselines.oracle.goal_room`).  With ``unknown_run`` (the oracle with the
     balls unknown) the same for that oracle, at the same weights: the room of a planner that
     knows the machine but not where its balls start.  Returns ``{"knots": result, "rooms":
-    [room, ...]}``, each room ``{"label", "search", "frontier": [(weight, result), ...],
-    "room": result}``."""
+    [room, ...], "weight": the agent's residual weight}``, each room ``{"label", "search",
+    "frontier": [(weight, result), ...], "room": result}``."""
     from abb_gym.baselines.oracle import goal_room, oracle_result
     knots = by_spec[f"baseline:{STRONGEST_OPEN_LOOP}"]
     kinds = [("goal room", run, 0, f"{room_budget(args)} candidates from the tuned knots")]
@@ -338,7 +338,8 @@ def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict,
         room = goal_room(knots, [dict(r, machines=r["machines"][:args.episodes])
                                  for r in runs])
         rooms.append({"label": label, "search": search, "frontier": frontier, "room": room})
-    return {"knots": knots, "rooms": rooms}
+    weight = scaled_residual(setting.env_kwargs, 1.0)["reward"]["residual"]
+    return {"knots": knots, "rooms": rooms, "weight": weight}
 
 
 def room_budget(args) -> int:
@@ -348,7 +349,8 @@ def room_budget(args) -> int:
 
 
 def _oracle_label(room: dict) -> str:
-    return "oracle" + room["label"][len("goal room"):]
+    """"oracle" or "oracle with the balls unknown", after the room's label."""
+    return "oracle" + room["label"][len("goal room"):].replace(", balls", " with the balls")
 
 
 def room_points(rooms: dict) -> list[dict]:
@@ -379,11 +381,10 @@ def room_lines(rooms: dict) -> dict:
         r_mean = room["room"].summary()["residual_vibration"]["mean"]
         gap = {k: paired_gap(room["room"], knots, k) for k in ROOM_METRICS}
         cut = gap["residual_vibration"]
-        weights = " and ".join(f"{w:g}" for w, _ in room["frontier"])
-        plural = "s" if len(room["frontier"]) > 1 else ""
-        lines[f"{room['label']} - knots (per machine the least residual of knots, the "
-              f"{_oracle_label(room)} and the {_oracle_label(room)} at residual weight{plural} "
-              f"{weights} ({room['search']}), at a mean run-up no longer than knots': "
+        weights = ", ".join(f"{w:g}" for w, _ in room["frontier"])
+        lines[f"{room['label']} - knots (per machine the least residual among knots and the "
+              f"{_oracle_label(room)} at residual weights {rooms['weight']:g}, {weights} (at "
+              f"{weights}: {room['search']}), at a mean run-up no longer than knots': "
               f"{r_mean:.4g} against {k_mean:.4g} W_r/e, "
               f"{100 * cut['mean'] / k_mean:+.0f} % [{100 * cut['ci_low'] / k_mean:+.0f}, "
               f"{100 * cut['ci_high'] / k_mean:+.0f}] of knots' mean; the goal asks -20 %)"

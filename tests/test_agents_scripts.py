@@ -76,7 +76,7 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     (room,) = [k for k in gaps if k.startswith("goal room - knots")]
     (room_unknown,) = [k for k in gaps if k.startswith("goal room, balls unknown - knots")]
     scaled_lines = ["oracle at residual weight 18 - knots",
-                    "oracle, balls unknown at residual weight 18 - knots"]
+                    "oracle with the balls unknown at residual weight 18 - knots"]
     assert set(gaps) == {
         "oracle - knots", "PPO - knots", "feedback value (replay - PPO)", elsewhere,
         "oracle, balls unknown - knots", *scaled_lines, room, room_unknown}
@@ -89,9 +89,11 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
         assert gaps[key]["run_up_time"]["mean"] <= 1e-9
         assert gaps[key]["residual_vibration"]["mean"] <= 0.0
         assert "the goal asks -20 %" in key
-    assert "residual weight 18 (2 candidates from the tuned knots), at" in room
-    assert "residual weight 18 (3 candidates from the tuned knots, each on 2 ball starts)" \
-        in room_unknown
+    assert ("least residual among knots and the oracle at residual weights 6, 18 (at 18: 2 "
+            "candidates from the tuned knots), at") in room
+    assert ("least residual among knots and the oracle with the balls unknown at residual "
+            "weights 6, 18 (at 18: 3 candidates from the tuned knots, each on 2 ball starts)"
+            ) in room_unknown
     (scaled_unknown,) = [r for r in json.loads(
         (out / "oracle" / "yoshida_odd_varied_test_seed0_balls_unknown.json").read_text()
     )["runs"] if r["env_kwargs"] == {"reward": {"residual": 18.0}}]
