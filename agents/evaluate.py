@@ -344,8 +344,7 @@ def goal_room_of(setting: AgentSetting, args, run: dict, by_spec: dict,
 
 def room_budget(args) -> int:
     """CMA-ES candidates per machine of the oracle at a scaled residual weight."""
-    budget = getattr(args, "room_budget", None)
-    return args.oracle_budget if budget is None else budget
+    return args.oracle_budget if args.room_budget is None else args.room_budget
 
 
 def _oracle_label(room: dict) -> str:

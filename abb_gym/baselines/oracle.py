@@ -136,11 +136,15 @@ def oracle_result(run: dict[str, Any], episodes: int | None = None,
     machines = run["machines"] if episodes is None else run["machines"][:episodes]
     name = oracle_name(run.get("family", "knots"), run.get("ball_draws", 0))
     result = EvaluationResult(name, env_id, run["scene"], run["preset"], run["seed"])
-    for row in machines:
-        result.episodes.append({k: v for k, v in row.items()
-                                if k not in ("params", "candidates", "start_index")}
-                               | {"policy": name})
+    result.episodes.extend(_as_episode(row, name) for row in machines)
     return result
+
+
+def _as_episode(row: dict[str, Any], policy: str, **extra: Any) -> dict[str, Any]:
+    """An oracle run's machine row as an evaluation episode of ``policy``: its metrics, without
+    the search's bookkeeping (``params``, ``candidates``, ``start_index``)."""
+    return {k: v for k, v in row.items() if k not in ("params", "candidates", "start_index")} \
+        | {"policy": policy, **extra}
 
 
 ELSEWHERE_METRICS = ("return", "residual_vibration", "run_up_time", "peak_whirl", "at_speed")
@@ -230,8 +234,8 @@ def goal_room(baseline: EvaluationResult, runs: list[dict[str, Any]],
     for index, run in enumerate(runs):
         for row in run["machines"]:
             k = int(row["episode"])
-            if k in options and math.isfinite(float(options[k][0][0])) \
-                    and math.isfinite(float(row[key])) and math.isfinite(float(row[cost])):
+            if k in options and math.isfinite(float(row[key])) \
+                    and math.isfinite(float(row[cost])):
                 options[k].append((float(row[key]), float(row[cost]), index, row))
     settled = [opts for opts in options.values() if math.isfinite(opts[0][0])]
     # the baseline's unsettled machines keep its run: the key is averaged over the machines
@@ -242,10 +246,8 @@ def goal_room(baseline: EvaluationResult, runs: list[dict[str, Any]],
     name = f"{baseline.policy} room: least {key} at no longer {cost}"
     result = EvaluationResult(name, baseline.env_id, baseline.scene, baseline.preset,
                               baseline.seed)
-    for _, _, source, row in chosen:
-        result.episodes.append({k: v for k, v in row.items()
-                                if k not in ("params", "candidates", "start_index")}
-                               | {"policy": name, "source": source})
+    result.episodes.extend(_as_episode(row, name, source=source)
+                           for _, _, source, row in chosen)
     return result
 
 
