@@ -25,7 +25,9 @@ drawn as the preset draws them, kept in ``..._balls_unknown.json``).  The oracle
 kept in ``<out>/oracle/<scene>_<preset>_seed<seed>.json`` and reused while scene, preset,
 seed, reward, budget and start match, so agents that share them (the three yoshida_odd
 ``train`` agents) share one oracle; a file holds the runs of every reward its agents use
-(``--oracle-budget 0``: no oracle).
+(``--oracle-budget 0``: no oracle).  The machines' searches run in parallel, on
+``--workers`` local processes (default: every core) or on Ray (``--ray``), with the same rows
+either way.
 
 The oracle plans on each machine as drawn, the balls' initial angles included, which no drive
 measures.  The gap section therefore also replays each machine's oracle profile, and the tuned
@@ -219,6 +221,16 @@ def scaled_residual(env_kwargs: dict, factor: float) -> dict:
     return {**env_kwargs, "reward": reward}
 
 
+def oracle_executor(args):
+    """Where the oracle's per-machine searches and its replays with the balls elsewhere run:
+    ``--workers`` local processes (default: every core), or Ray with ``--ray`` /
+    ``--ray-address``; the results do not depend on it
+    (:func:`abb_gym.baselines.tuner.tune_per_machine`,
+    :func:`abb_gym.baselines.oracle.balls_elsewhere`)."""
+    from abb_gym.execution.cli import executor_from_args
+    return executor_from_args(args)
+
+
 def oracle_run(setting: AgentSetting, args, ball_draws: int = 0,
                residual_factor: float = 1.0) -> dict:
     """The oracle of the agent's test machines: machine by machine the best of the per-machine
@@ -262,7 +274,7 @@ def oracle_run(setting: AgentSetting, args, ball_draws: int = 0,
                   f"{len(starts)}) -> {path}", flush=True)
             run = run_oracle(setting.scene, setting.preset, args.episodes, args.seed,
                              budget, env_kwargs=env_kwargs, start=start,
-                             ball_draws=ball_draws)
+                             ball_draws=ball_draws, executor=oracle_executor(args))
             computed = True
         runs.append(run)
     if computed:  # another reward's runs (another agent's oracle) stay in the file
@@ -304,7 +316,8 @@ def elsewhere_gap(setting: AgentSetting, run: dict, args) -> dict:
         print(f"oracle: {setting.scene} {setting.preset}, each machine's profile and knots "
               f"with the balls started elsewhere ({args.elsewhere_draws} draws)", flush=True)
         oracle, knots = balls_elsewhere(run, tuned_parameters(setting.scene, STRONGEST_OPEN_LOOP),
-                                        args.elsewhere_draws, args.episodes)
+                                        args.elsewhere_draws, args.episodes,
+                                        executor=oracle_executor(args))
         _ELSEWHERE[key] = paired_gaps(oracle, knots)
     return _ELSEWHERE[key]
 
@@ -545,6 +558,7 @@ def replace_between_markers(path: Path, text: str, begin: str = BEGIN, end: str 
 
 
 def main(argv=None) -> int:
+    from abb_gym.execution.cli import add_executor_arguments
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "),
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("agents", nargs="*",
@@ -576,6 +590,7 @@ def main(argv=None) -> int:
                    help="CMA-ES candidates per machine of the oracle at those weights "
                         "(default: --oracle-budget)")
     p.add_argument("--out", default="agents/results", help="report folder")
+    add_executor_arguments(p, resume=False)
     p.add_argument("--readme", type=Path, default=None,
                    help="regenerate the comparison section of this Markdown file (default "
                         "without agent names: agents/README.md)")
@@ -605,6 +620,7 @@ def main(argv=None) -> int:
             if not factor > 0 or factor == 1 or factor > 1e4:
                 raise ValueError(f"--room-factors must lie in (0, 10000] and differ from 1 "
                                  f"(the agent's own weight is the oracle's; got {factor})")
+        oracle_executor(args)  # inconsistent --workers / --ray options, before anything runs
         for flag, path in (("--readme", args.readme), ("--gap-readme", args.gap_readme)):
             if path is not None and not path.is_file():
                 raise ValueError(f"{flag} {path} is not a file")

@@ -157,6 +157,7 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
     rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "3",
                       "--machine-oracle-budget", "0", "--elsewhere-draws", "0",
                       "--room-factors", "--baselines", "knots", "retry", "--out", str(out),
+                      "--workers", "1",
                       "--readme", str(tmp_path / "agents.md"), "--gap-readme", str(readme)])
     assert rc == 0
     assert "#### Feedback gap: yoshida_odd, test (RunUpSpeed-v0, trained on train)" \

@@ -350,6 +350,25 @@ def test_tune_per_machine_tunes_each_test_machine_alone():
             assert r[key] == pytest.approx(mine[key], rel=1e-12, nan_ok=True)
 
 
+@pytest.mark.parametrize("ball_draws", [0, 2])
+def test_tune_per_machine_gives_the_same_rows_with_machines_in_worker_processes(ball_draws):
+    """With an executor each machine's search is a task of its own in another process: the
+    rows (every metric, the parameters, the candidates tried) equal the serial run's bit for
+    bit, in machine order, warm start and reward included."""
+    from abb_gym.baselines.baseline_policy import tuned_parameters
+    from abb_gym.execution import Executor
+    kw = dict(episodes=3, seed=11, preset="test", budget=7, progress=False,
+              start=tuned_parameters("yoshida_odd", "knots"), ball_draws=ball_draws,
+              env_kwargs={"reward": {"residual": 9.0}})
+    serial = tuner.tune_per_machine("yoshida_odd", "knots", **kw)
+    spread = tuner.tune_per_machine("yoshida_odd", "knots",
+                                    executor=Executor(workers=2, progress=False), **kw)
+    assert [r["episode"] for r in spread] == [0, 1, 2]
+    assert json.dumps(spread, sort_keys=True) == json.dumps(serial, sort_keys=True)
+    # the searches differ between machines (else equal rows would prove little)
+    assert len({json.dumps(r["params"], sort_keys=True) for r in serial}) == 3
+
+
 def test_oracle_is_an_evaluation_result_of_the_same_machines():
     """The oracle run becomes an EvaluationResult whose episode k is machine k of the test set
     (seed + k), so paired gaps against evaluate() pair the same machines; a stored run is
@@ -528,6 +547,13 @@ def test_balls_elsewhere_replays_the_same_machines_with_only_the_balls_moved():
     # and the draws are the same on every call
     again, _ = balls_elsewhere(run, knots, draws=2, progress=False)
     assert again.episodes == oracle.episodes
+    # in worker processes (one task per machine and draw) the results are the same, each
+    # profile in its own result (the family's default against the tuned knots)
+    from abb_gym.execution import Executor
+    serial = balls_elsewhere(run, {}, draws=2, progress=False)
+    spread = balls_elsewhere(run, {}, draws=2, executor=Executor(workers=2, progress=False))
+    assert json.dumps([r.episodes for r in spread]) == json.dumps([r.episodes for r in serial])
+    assert json.dumps(serial[0].episodes) != json.dumps(serial[1].episodes)
     with pytest.raises(ValueError, match="draws must be an integer >= 1"):
         balls_elsewhere(run, knots, draws=0)
 

@@ -151,7 +151,7 @@ ELSEWHERE_METRICS = ("return", "residual_vibration", "run_up_time", "peak_whirl"
 
 
 def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4,
-                    episodes: int | None = None, progress: bool = True
+                    episodes: int | None = None, progress: bool = True, executor=None
                     ) -> tuple[EvaluationResult, EvaluationResult]:
     """How much of the oracle's gain is knowing where each machine's balls start.
 
@@ -164,7 +164,10 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     the tuned ``knots``) run on the same draws.  Returns their results (oracle first), one row per
     machine, each metric of :data:`ELSEWHERE_METRICS` the mean over the draws (``at_speed``
     the share that settled; the residual over the draws that settled, NaN if none did), so that
-    :func:`abb_gym.evaluation.report.paired_gap` pairs them machine by machine."""
+    :func:`abb_gym.evaluation.report.paired_gap` pairs them machine by machine.  ``executor``
+    (an :class:`abb_gym.execution.Executor`) runs the machines' draws as independent tasks
+    (each is two run-ups, which the vector environment runs on one core), with the same
+    results; without it they run one after another in this process."""
     from ..envs.setup import EnvSetup
     _check_counts(draws=draws)
     machines = run["machines"] if episodes is None else run["machines"][:episodes]
@@ -175,22 +178,25 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     results = tuple(EvaluationResult(f"{label}, balls started elsewhere", ENV_ID, run["scene"],
                                      run["preset"], run["seed"])
                     for label in (name, "baseline:knots"))
-    with tqdm(total=len(machines) * draws, desc="oracle, balls started elsewhere",
-              unit="run-up pair", disable=not progress) as bar:
-        for row in machines:
-            k = int(row["episode"])
-            profiles = (as_candidate(row["params"]), as_candidate(compare))
-            scored = [[], []]
-            for options in ball_starts(setup, int(run["seed"]) + k, BALLS_ELSEWHERE_STREAM,
-                                       draws):
-                task = CandidateTask(ENV_ID, run["scene"], run["preset"],
-                                     run.get("family", "knots"), profiles, (k,), int(run["seed"]),
-                                     kw, reset_options=options)
-                for episode in _run_candidates(task):
-                    scored[episode["candidate"]].append(episode)
-                bar.update()
-            for result, rows in zip(results, scored):
-                result.episodes.append(_mean_row(rows, k, result.policy))
+    tasks = [CandidateTask(ENV_ID, run["scene"], run["preset"], run.get("family", "knots"),
+                           (as_candidate(row["params"]), as_candidate(compare)),
+                           (int(row["episode"]),), int(run["seed"]), kw, reset_options=options)
+             for row in machines
+             for options in ball_starts(setup, int(run["seed"]) + int(row["episode"]),
+                                        BALLS_ELSEWHERE_STREAM, draws)]
+    desc = "oracle, balls started elsewhere"
+    if executor is not None:
+        runs = executor.map(_run_candidates, tasks, desc=f"{desc}: run-up pairs")
+    else:
+        with tqdm(tasks, desc=desc, unit="run-up pair", disable=not progress) as bar:
+            runs = [_run_candidates(task) for task in bar]
+    for m, row in enumerate(machines):
+        scored = [[], []]
+        for episodes_of_draw in runs[m * draws:(m + 1) * draws]:
+            for episode in episodes_of_draw:
+                scored[episode["candidate"]].append(episode)
+        for result, rows in zip(results, scored):
+            result.episodes.append(_mean_row(rows, int(row["episode"]), result.policy))
     return results
 
 

@@ -410,6 +410,49 @@ def _optimiser(version: str, budget: int, restarts: int, start: dict) -> str:
     return text
 
 
+@dataclass(frozen=True)
+class MachineSearch:
+    """One machine's search of :func:`tune_per_machine` (a picklable task): machine
+    ``episode`` of the seeded test set, reset with ``seed + episode``."""
+    scene_name: str
+    family: str
+    episode: int
+    seed: int
+    preset: str
+    budget: int
+    env_id: str
+    env_kwargs: tuple  # sorted (key, value) pairs
+    start: dict[str, Any] | None
+    ball_draws: int
+
+
+def _search_machine(task: MachineSearch, bar=None) -> dict[str, Any]:
+    """Tune ``task.family`` on its machine alone (in this process; ``bar`` counts the
+    candidates) and return the best candidate's full evaluation row."""
+    env_kwargs = dict(task.env_kwargs)
+    scales = search_scales(task.scene_name, task.env_id, task.preset)
+    seed = task.seed + task.episode
+    option_sets = ((),)
+    if task.ball_draws:
+        from ..envs.setup import EnvSetup
+        setup = EnvSetup(_KINDS[task.env_id], task.scene_name, task.preset,
+                         overrides=env_kwargs or None)
+        option_sets = ball_starts(setup, seed, SEARCH_BALLS_STREAM, task.ball_draws)
+    best, _, n = _cma_search(task.family, task.scene_name, scales, task.budget, None, 1, seed,
+                             task.preset, task.env_id, None, bar, env_kwargs or None,
+                             task.start, option_sets=option_sets)
+    if bar is not None:
+        _shrink_bar(bar, task.budget, n)
+    # the search keeps means of a few metrics; the best candidate's episode once more
+    # (deterministic: the same numbers) gives all of them
+    params = as_candidate(best["params"])
+    (row,) = _run_candidates(CandidateTask(task.env_id, task.scene_name, task.preset,
+                                           task.family, (params,), (0,), seed,
+                                           task.env_kwargs))
+    del row["candidate"]
+    return dict(row, episode=task.episode, seed=seed, params=best["params"], candidates=n)
+
+
 def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100,
                      seed: int = 0, preset: str = "test", budget: int = 120,
                      env_id: str = ENV_ID, env_kwargs: dict[str, Any] | None = None,
@@ -435,38 +478,29 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     the same draws for every candidate), and the best is then scored on the machine as drawn,
     with ball angles the search never saw.  That is an open-loop planner that knows every
     parameter of the machine (the preset's ``varied`` scales, the imbalance) but not the
-    balls; ``start`` is then one of its candidates on the draws, not a floor on the machine."""
+    balls; ``start`` is then one of its candidates on the draws, not a floor on the machine.
+
+    ``executor`` (an :class:`abb_gym.execution.Executor`) runs the machines' searches as
+    independent tasks, one per machine (a search's CMA-ES generations are batches of a few
+    candidates, which the vector environment runs on one core: the machines are what fills
+    the others).  Each search is a function of its machine alone, so the rows are the same
+    with or without it, bit for bit.  Without it the searches run one after another in this
+    process, with a bar counting candidates."""
     _check_counts(budget=budget, episodes=episodes)
     if isinstance(ball_draws, bool) or not isinstance(ball_draws, (int, np.integer)) \
             or ball_draws < 0:
         raise ValueError(f"ball_draws must be an integer >= 0 (got {ball_draws!r})")
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     family_class(family)
-    scales = search_scales(scene_name, env_id, preset)
     kw = tuple(sorted((env_kwargs or {}).items()))
-    rows = []
+    tasks = [MachineSearch(scene_name, family, k, seed, preset, budget, env_id, kw, start,
+                           int(ball_draws)) for k in range(episodes)]
+    if executor is not None:
+        return executor.map(_search_machine, tasks,
+                            desc=f"oracle {family} {scene_name}: machines")
     with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
               unit="candidate", disable=not progress) as bar:
-        if ball_draws:
-            from ..envs.setup import EnvSetup
-            setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
-        for k in range(episodes):
-            option_sets = ((),)
-            if ball_draws:
-                option_sets = ball_starts(setup, seed + k, SEARCH_BALLS_STREAM, ball_draws)
-            best, _, n = _cma_search(family, scene_name, scales, budget, None, 1, seed + k,
-                                     preset, env_id, executor, bar, env_kwargs, start,
-                                     option_sets=option_sets)
-            _shrink_bar(bar, budget, n)
-            # the search keeps means of a few metrics; the best candidate's episode once more
-            # (deterministic: the same numbers) gives all of them
-            params = as_candidate(best["params"])
-            (row,) = _run_candidates(CandidateTask(env_id, scene_name, preset, family,
-                                                   (params,), (0,), seed + k, kw))
-            del row["candidate"]
-            rows.append(dict(row, episode=k, seed=seed + k, params=best["params"],
-                             candidates=n))
-    return rows
+        return [_search_machine(task, bar) for task in tasks]
 
 
 def _rounded(params: dict[str, Any]) -> dict[str, Any]:
