@@ -1,12 +1,30 @@
 """The environment step's arrays travel to the compiled kernel packed in one StructRef
 (abb_gym.envs.kernel.StepArrays): the kernel must work on the buffers' own memory, in the
-order of STEP_ARRAYS, and the entry-point cache must tell packs of different array types
-apart."""
+order of its parameters, the entry-point cache must tell packs of different array types
+apart, and the literal ball count and effects must reach the equations (the specialised
+kernel)."""
+import ast
+import inspect
+import textwrap
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
+from numba import njit, types
+
+import abb_gym
 
 from abb_gym.envs import kernel as K
 from abb_gym.envs.setup import Buffers, EnvSetup
+
+
+@njit
+def _fields(a):
+    """The pack's fields read by name in compiled code, in the order of STEP_ARRAYS."""
+    return (a.order, a.act, a.s, a.p, a.b, a.d, a.st_rows, a.cfg, a.obs, a.out, a.trace,
+            a.active, a.bs, a.bp, a.bb, a.bd, a.bk, a.btmp, a.blam, a.bcoef, a.bwork, a.bf,
+            a.bg, a.bact)
 
 
 @pytest.fixture(scope="module")
@@ -20,18 +38,29 @@ def test_pack_holds_the_buffers_arrays_not_copies(bufs):
     packed, nb, spec = bufs.kernel_args()
     assert isinstance(packed, K.StepArrays) and nb == 2 and spec == bufs.spec
     bufs.act[2, 0] = 0.625
-    fields = K.step_array_fields(packed)
-    assert fields[K.STEP_ARRAYS.index("act")][2, 0] == 0.625
+    assert _fields(packed)[K.STEP_ARRAYS.index("act")][2, 0] == 0.625
 
 
-def test_the_kernel_unpacks_in_the_buffers_order(bufs):
-    """Every field the kernel unpacks is the buffer array at the same position (two arrays of
-    one type swapped would compile and run on the wrong data)."""
+@pytest.mark.parametrize("wrapper, kernel", [("_step_serial_packed", "_step_serial"),
+                                             ("_step_parallel_packed", "_step_parallel")])
+def test_the_kernel_unpacks_in_the_buffers_order(bufs, monkeypatch, wrapper, kernel):
+    """The wrapper hands the kernel, parameter by parameter, the buffer array of that name (two
+    arrays of one type swapped would compile and run on the wrong data): its Python body runs
+    here with the kernel replaced by a recorder."""
     arrays = bufs.step_arrays()
     assert len(arrays) == len(K.STEP_ARRAYS)
-    fields = K.step_array_fields(bufs.kernel_args()[0])
-    assert len(fields) == len(arrays)
-    for name, mine, theirs in zip(K.STEP_ARRAYS, fields, arrays):
+    # the kernel's parameters are the pack's fields, in order ("st" is the field "st_rows")
+    params = list(inspect.signature(getattr(K, kernel).py_func).parameters)
+    assert params == [("st" if n == "st_rows" else n) for n in K.STEP_ARRAYS] + ["nb", "spec"]
+    packed, nb, spec = bufs.kernel_args()
+    # the pack's fields as compiled code reads them, by name
+    fields = SimpleNamespace(**dict(zip(K.STEP_ARRAYS, _fields(packed))))
+    seen = []
+    monkeypatch.setattr(K, kernel, lambda *args: seen.append(args))
+    getattr(K, wrapper).py_func(fields, nb, spec)
+    (args,) = seen
+    assert args[-2:] == (nb, spec) and len(args) == len(arrays) + 2
+    for name, mine, theirs in zip(K.STEP_ARRAYS, args, arrays):
         assert mine.shape == theirs.shape and mine.dtype == theirs.dtype, name
         assert theirs.size == 0 or np.shares_memory(mine, theirs), name
         for other in arrays:
@@ -48,3 +77,64 @@ def test_entry_points_are_keyed_by_the_packed_types(bufs):
     assert K.step_serial._key((K.pack_step_arrays(*arrays), nb, spec)) == key
     arrays[K.STEP_ARRAYS.index("act")] = bufs.act.astype(np.float32)
     assert K.step_serial._key((K.pack_step_arrays(*arrays), nb, spec)) != key
+
+
+def _calls_with_literal_beside_star_arguments(tree) -> list[str]:
+    """Calls in compiled (``njit``-decorated) functions that pass one of the specialised
+    kernels' literal arguments (``nb``, ``spec``, ``method``) beside star arguments."""
+    literal = {"nb", "spec", "method"}
+    found = []
+    for fn in ast.walk(tree):
+        if not isinstance(fn, ast.FunctionDef) or not any(
+                "njit" in ast.unparse(d) for d in fn.decorator_list):
+            continue
+        for call in ast.walk(fn):
+            if isinstance(call, ast.Call) and any(isinstance(a, ast.Starred) for a in call.args) \
+                    and any(isinstance(a, ast.Name) and a.id in literal for a in call.args):
+                found.append(f"{fn.name}: {ast.unparse(call)}")
+    return found
+
+
+def test_numba_drops_literal_types_in_a_star_call():
+    """Why the rule below: an argument typed as a literal reaches a callee as a literal when
+    passed by itself, and as a plain integer when the call has star arguments (numba builds one
+    tuple of them).  The specialised kernels get their ball count and effects as literals; a
+    star call on the way compiles every function below it as the general kernel."""
+    @njit
+    def callee(x, y, nb):
+        return x + y + nb
+
+    @njit
+    def pair(a):
+        return (a, a)
+
+    @njit
+    def star(a, nb):
+        return callee(*pair(a), nb)
+
+    @njit
+    def plain(a, nb):
+        x, y = pair(a)
+        return callee(x, y, nb)
+
+    star.compile((types.float64, types.literal(2)))
+    assert [str(s[2]) for s in callee.signatures] == ["int64"]
+    plain.compile((types.float64, types.literal(3)))
+    assert "Literal[int](3)" in [str(s[2]) for s in callee.signatures]
+    # and the check below sees exactly that call
+    source = textwrap.dedent(inspect.getsource(star.py_func))
+    assert _calls_with_literal_beside_star_arguments(ast.parse(source)) == [
+        "star: callee(*pair(a), nb)"]
+
+
+def test_no_compiled_call_passes_a_literal_argument_beside_star_arguments():
+    """The environment step passed its arrays as star arguments from 2026-11-23 to 2026-11-24:
+    the literal ball count and effects became plain integers on the way, and the environments
+    ran the general kernel at its speed while counting as specialised (the vector environment
+    at 1024: 330,000 instead of 845,000 env-steps/s)."""
+    package = Path(abb_gym.__file__).parent
+    found = []
+    for path in sorted(package.rglob("*.py")):
+        found += [f"{path.relative_to(package)}: {c}"
+                  for c in _calls_with_literal_beside_star_arguments(ast.parse(path.read_text()))]
+    assert found == []
