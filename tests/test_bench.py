@@ -95,3 +95,12 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     assert total == 16
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")
+
+
+def test_the_speed_table_warns_when_the_specialised_kernel_is_not_in_effect():
+    from abb_gym.benchmarks.env_speed import SPECIALISATION_FLOOR, specialisation_note
+    assert specialisation_note(845_000, 328_000) == "specialised/general = 2.58x"
+    lost = specialisation_note(330_000, 328_000)
+    assert lost.startswith("specialised/general = 1.01x - WARNING") and "not in effect" in lost
+    assert "WARNING" in specialisation_note(SPECIALISATION_FLOOR * 0.99, 1.0)
+    assert "WARNING" not in specialisation_note(SPECIALISATION_FLOOR, 1.0)

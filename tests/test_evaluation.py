@@ -118,6 +118,52 @@ def test_evaluation_is_deterministic_and_independent_of_chunking():
     assert [e["return"] for e in c.episodes] != [e["return"] for e in a.episodes]
 
 
+@pytest.mark.parametrize("policy", ["baseline:knots", "baseline:retry",
+                                    "replay:baseline:resonance_dwell"])
+def test_a_policy_that_reads_no_info_is_evaluated_on_the_lean_info_with_the_same_metrics(
+        policy, monkeypatch):
+    """Policies that declare ``reads_info = False`` (open loop, closed loop on the observation,
+    replays, agents) run on the lean info; every metric of every episode is the same as on the
+    full info of every step (the final info of an episode holds every key either way)."""
+    from abb_gym.envs.vector import BalancerVectorEnv
+    levels = []
+    step = BalancerVectorEnv.step
+
+    def spy(self, actions):
+        levels.append(self.info_level)
+        return step(self, actions)
+
+    monkeypatch.setattr(BalancerVectorEnv, "step", spy)
+    lean = evaluate(SPEED, "yoshida_odd", policy, episodes=3, seed=4)
+    assert set(levels) == {"lean"}
+    levels.clear()
+    full = evaluate(SPEED, "yoshida_odd", policy, episodes=3, seed=4, info_level="full")
+    assert set(levels) == {"full"}
+    assert json.dumps(lean.episodes, sort_keys=True) == json.dumps(full.episodes, sort_keys=True)
+    assert len(lean.episodes) == 3 and all("run_up_time" in e for e in lean.episodes)
+
+
+class _ReadsTime:
+    """A policy that reads ``info["time"]`` (as the Policy protocol allows by default)."""
+    name = "reads-time"
+
+    def reset(self, env, mask):
+        pass
+
+    def act(self, obs, info):
+        return np.where(np.asarray(info["time"]) < 1.0, 1.0, 0.2).astype(np.float32)[:, None]
+
+
+def test_a_policy_that_reads_info_keeps_the_full_info_also_when_replayed(monkeypatch):
+    """Without ``reads_info = False`` a policy gets every key at every step, and so does a
+    policy recorded for a replay (the replay itself reads none)."""
+    from abb_gym.evaluation import registry
+    monkeypatch.setitem(registry._LOADERS, "readstime", lambda arg, **_: _ReadsTime())
+    own = evaluate(SPEED, "yoshida_odd", "readstime:x", episodes=2, seed=4)
+    replay = evaluate(SPEED, "yoshida_odd", "replay:readstime:x", episodes=2, seed=4)
+    assert len(own.episodes) == len(replay.episodes) == 2
+
+
 def test_summary_confidence_intervals():
     p, lo, hi = share_ci(5, 10)
     assert p == 0.5 and lo == pytest.approx(0.2366, abs=1e-3) and hi == pytest.approx(0.7634, abs=1e-3)

@@ -100,6 +100,9 @@ class SpeedReferencePolicy:
 
     name = "baseline"
     params: dict[str, Any] = {}
+    #: the evaluation's hint (:mod:`abb_gym.evaluation.registry`): these policies read the
+    #: observation or the environment, never ``info``
+    reads_info = False
 
     def _bind(self, env) -> None:
         self._env = env.unwrapped
@@ -230,6 +233,7 @@ class _LazyBaseline:
         self._inner = None
         self.name = f"baseline:{family}"
         self.params: dict[str, Any] = {}
+        self.reads_info = False  # neither policy it resolves to reads info
 
     def _resolve(self, setup: Any):
         if self._inner is None:

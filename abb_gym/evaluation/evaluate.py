@@ -87,7 +87,8 @@ class EvaluationResult:
 
 def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
     """The native vector environment of a chunk, recording every sub-environment's history,
-    with the full per-step info (policies read ``time`` and ``rotor_speed`` from it)."""
+    with the full per-step info (a policy may read ``time`` and ``rotor_speed`` from it;
+    :func:`run_chunk` makes it lean for a policy that declares ``reads_info = False``)."""
     env_kwargs.setdefault("info_level", "full")
     return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         scene=scene, preset=preset, record_history=True, **env_kwargs)
@@ -108,6 +109,12 @@ def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict
     elif not hasattr(policy, "act"):
         policy = policy(env)
     native = env.unwrapped
+    if getattr(policy, "reads_info", True) is False \
+            and "info_level" not in dict(chunk.env_kwargs):
+        # the final info of each episode is all the metrics read; the lean info holds every
+        # key where an episode ends (the full info of every step was most of the Python cost
+        # of a tuner's small batches)
+        native.info_level = "lean"
     setup = native.setup
     options = {key: list(v) if isinstance(v, tuple) else v for key, v in chunk.reset_options}
     obs, info = env.reset(seed=[chunk.seed + k for k in chunk.indices], options=options or None)

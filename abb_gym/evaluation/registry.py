@@ -14,6 +14,9 @@ A policy acts on a *vector* environment (one row per sub-environment)::
 * ``act(obs, info)`` returns actions of shape ``(num_envs,) + single_action_space.shape``
   from the observation batch and the info dict of the last step or reset (arrays of length
   ``num_envs``: ``time`` [s], ``rotor_speed`` [rad/s], ...).
+* ``reads_info`` (optional, default True): a policy that never reads ``info`` sets it to
+  False, and the evaluation then steps with the lean info (every key only where an episode
+  ends), which costs less than the full info of every step.  The metrics are the same.
 
 ``resolve(spec, env_id, scene)`` builds a policy from a string ``KIND:ARG`` through a
 registry of loaders.  The registry is filled from the ``abb_gym.policies`` entry points of

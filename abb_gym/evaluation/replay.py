@@ -27,8 +27,9 @@ __all__ = ["ReplayPolicy", "load_replay", "record_actions", "feedback_value",
 FEEDBACK_METRICS = ("residual_vibration", "run_up_time", "return")
 
 
-def _nominal_env(env: Any):
-    """A one-environment copy of ``env`` on the nominal machine (no randomisation)."""
+def _nominal_env(env: Any, info_level: str | None = None):
+    """A one-environment copy of ``env`` on the nominal machine (no randomisation), with
+    ``info_level`` (default: ``env``'s)."""
     from ..envs.config import load_preset
     setup = env.unwrapped.setup
     config = load_preset(setup.config, randomize={k: None for k in
@@ -36,7 +37,7 @@ def _nominal_env(env: Any):
     return gym.make_vec(env.spec.id if env.spec else _env_id(setup), num_envs=1,
                         vectorization_mode="vector_entry_point", scene=setup.scene,
                         preset=config, observe_balls=setup.observe_balls,
-                        info_level=getattr(env.unwrapped, "info_level", "full"))
+                        info_level=info_level or getattr(env.unwrapped, "info_level", "full"))
 
 
 def _env_id(setup) -> str:
@@ -61,6 +62,8 @@ def record_actions(policy: Any, env: Any) -> np.ndarray:
 class ReplayPolicy:
     """Policy ``spec`` recorded on the nominal machine, replayed open-loop (module docstring)."""
 
+    reads_info = False  # the recorded actions, in order
+
     def __init__(self, spec: str, env_id: str | None = None, scene: Any = None):
         self.spec = spec
         self.env_id = env_id
@@ -72,7 +75,9 @@ class ReplayPolicy:
     def reset(self, env: Any, mask: np.ndarray) -> None:
         if self.actions is None:
             inner = resolve(self.spec, self.env_id or _env_id(env.unwrapped.setup), self.scene)
-            nominal = _nominal_env(env)
+            # the recorded policy gets the info it reads (the replay itself reads none)
+            nominal = _nominal_env(env, None if getattr(inner, "reads_info", True) is False
+                                   else "full")
             self.actions = record_actions(inner, nominal)
             nominal.close()
             self.name = f"replay:{getattr(inner, 'name', self.spec)}"

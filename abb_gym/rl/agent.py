@@ -88,6 +88,8 @@ class PPOPolicy:
         ``agent.yml``), checked against the environment's; None: not checked.
     """
 
+    reads_info = False  # the evaluation's hint: the agent sees the observation only
+
     def __init__(self, model: Any, vecnormalize: Any = None, config: dict | None = None,
                  name: str = "ppo", deterministic: bool = True,
                  observation_names: list[str] | None = None):
