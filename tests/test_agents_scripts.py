@@ -53,7 +53,7 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
                       "--machine-oracle-draws", "2", "--room-factors", "3",
                       "--room-budget", "2", "--baselines", "knots", "retry",
                       "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
-                      "--gap-readme", str(readme)])
+                      "--gap-readme", str(readme), "--workers", "1"])
     assert rc == 0
     gap = readme.read_text()
     assert gap.startswith("intro\n") and gap.endswith("end\n") and "old gap" not in gap
