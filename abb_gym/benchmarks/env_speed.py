@@ -54,9 +54,9 @@ def specialisation_note(specialised: float, general: float) -> str:
     ratio = specialised / general
     note = f"specialised/general = {ratio:.2f}x"
     if ratio < SPECIALISATION_FLOOR:
-        note += (f" - WARNING: below {SPECIALISATION_FLOOR}x, the specialised kernel is not in "
-                 f"effect (do the literal ball count and effects reach the equations? see "
-                 f"abb_gym.envs.kernel)")
+        note += (f" - WARNING: below {SPECIALISATION_FLOOR}x, the specialised kernel may not be "
+                 f"in effect (do the literal ball count and effects reach the equations? see "
+                 f"abb_gym.envs.kernel), or the machine was busy")
     return note
 
 
