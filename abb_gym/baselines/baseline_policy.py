@@ -227,13 +227,14 @@ def make_baseline(family: str, scene: Scene, operating_speed: float | None = Non
 class _LazyBaseline:
     """Resolved at the first reset, when the environment's operating speed is known."""
 
+    reads_info = False  # neither policy it resolves to reads info
+
     def __init__(self, family: str, scene: Scene):
         self.family = family
         self.scene = scene
         self._inner = None
         self.name = f"baseline:{family}"
         self.params: dict[str, Any] = {}
-        self.reads_info = False  # neither policy it resolves to reads info
 
     def _resolve(self, setup: Any):
         if self._inner is None:

@@ -413,7 +413,9 @@ def _optimiser(version: str, budget: int, restarts: int, start: dict) -> str:
 @dataclass(frozen=True)
 class MachineSearch:
     """One machine's search of :func:`tune_per_machine` (a picklable task): machine
-    ``episode`` of the seeded test set, reset with ``seed + episode``."""
+    ``episode`` of the seeded test set, reset with ``seed + episode``; ``scales`` the search
+    box's units (:func:`search_scales`), ``option_sets`` the reset options every candidate
+    runs under (:func:`ball_starts`, or ``((),)``: the machine as drawn)."""
     scene_name: str
     family: str
     episode: int
@@ -423,24 +425,18 @@ class MachineSearch:
     env_id: str
     env_kwargs: tuple  # sorted (key, value) pairs
     start: dict[str, Any] | None
-    ball_draws: int
+    scales: dict[str, float]
+    option_sets: tuple
 
 
 def _search_machine(task: MachineSearch, bar=None) -> dict[str, Any]:
     """Tune ``task.family`` on its machine alone (in this process; ``bar`` counts the
     candidates) and return the best candidate's full evaluation row."""
-    env_kwargs = dict(task.env_kwargs)
-    scales = search_scales(task.scene_name, task.env_id, task.preset)
     seed = task.seed + task.episode
-    option_sets = ((),)
-    if task.ball_draws:
-        from ..envs.setup import EnvSetup
-        setup = EnvSetup(_KINDS[task.env_id], task.scene_name, task.preset,
-                         overrides=env_kwargs or None)
-        option_sets = ball_starts(setup, seed, SEARCH_BALLS_STREAM, task.ball_draws)
-    best, _, n = _cma_search(task.family, task.scene_name, scales, task.budget, None, 1, seed,
-                             task.preset, task.env_id, None, bar, env_kwargs or None,
-                             task.start, option_sets=option_sets)
+    best, _, n = _cma_search(task.family, task.scene_name, task.scales, task.budget, None, 1,
+                             seed, task.preset, task.env_id, None, bar,
+                             dict(task.env_kwargs) or None, task.start,
+                             option_sets=task.option_sets)
     if bar is not None:
         _shrink_bar(bar, task.budget, n)
     # the search keeps means of a few metrics; the best candidate's episode once more
@@ -493,8 +489,14 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
     family_class(family)
     kw = tuple(sorted((env_kwargs or {}).items()))
+    scales = search_scales(scene_name, env_id, preset)
+    if ball_draws:
+        from ..envs.setup import EnvSetup
+        setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
     tasks = [MachineSearch(scene_name, family, k, seed, preset, budget, env_id, kw, start,
-                           int(ball_draws)) for k in range(episodes)]
+                           scales, ball_starts(setup, seed + k, SEARCH_BALLS_STREAM, ball_draws)
+                           if ball_draws else ((),))
+             for k in range(episodes)]
     if executor is not None:
         return executor.map(_search_machine, tasks,
                             desc=f"oracle {family} {scene_name}: machines")

@@ -75,9 +75,10 @@ class ReplayPolicy:
     def reset(self, env: Any, mask: np.ndarray) -> None:
         if self.actions is None:
             inner = resolve(self.spec, self.env_id or _env_id(env.unwrapped.setup), self.scene)
-            # the recorded policy gets the info it reads (the replay itself reads none)
-            nominal = _nominal_env(env, None if getattr(inner, "reads_info", True) is False
-                                   else "full")
+            # the recorded policy gets the full info unless it reads none (the replay itself
+            # reads none, so the evaluation may have made env's info lean)
+            reads = getattr(inner, "reads_info", True) is not False
+            nominal = _nominal_env(env, "full" if reads else None)
             self.actions = record_actions(inner, nominal)
             nominal.close()
             self.name = f"replay:{getattr(inner, 'name', self.spec)}"
