@@ -59,12 +59,14 @@ from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
 from .. import resources
+from ..physics.methods import PRECISIONS
 from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
                              read_yaml, specs)
 
 __all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "SyncVibration",
            "load_preset",
-           "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS"]
+           "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS",
+           "PRECISIONS"]
 
 Range = tuple[float, float]
 INTEGRATORS = ("rk4", "etdrk4")
@@ -187,6 +189,9 @@ class EnvConfig:
                                            "the best")
     integrator: str = declare("rk4", kind="choice", choices=INTEGRATORS,
                               doc="compiled fixed-step method (etdrk4: exact stiff drag)")
+    precision: str = declare("float64", kind="choice", choices=PRECISIONS,
+                             doc="arithmetic of the compiled step: float32 (rk4 only) is "
+                                 "faster on many sub-environments, less accurate")
     integration_step: float | None = declare(None, unit="s", ge=1e-7, le=1.0, nullable=True,
                                              doc="step bound; null = default_step of each "
                                                  "episode")
@@ -305,6 +310,10 @@ def load_preset(preset: str | os.PathLike | Mapping[str, Any] | EnvConfig = "tra
     if values.get("description") is None:
         values["description"] = ""
     cfg = build(EnvConfig, values, where, PresetError)
+    if cfg.precision == "float32" and cfg.integrator != "rk4":
+        raise PresetError(f"{where}: field 'precision' = 'float32' needs integrator = 'rk4' "
+                          f"(got integrator = {cfg.integrator!r}); allowed with "
+                          f"{cfg.integrator!r}: 'float64'")
     if cfg.episode_length is not None and cfg.episode_length <= cfg.control_interval:
         raise PresetError(f"{where}: field 'episode_length' must be > control_interval = "
                           f"{cfg.control_interval:g} s (got {cfg.episode_length:g} s)")

@@ -338,7 +338,7 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
         if _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
             g[G_STEPPING, l] = 1
             g[G_INTEGRATE, l] = 1
-            batch.load_lane(s, p, b, i, sb, pb, bbq, l)
+            batch.load_lane(s, p, b, i, sb, pb, bbq, f, l)
     while True:
         any_lane = False
         for l in range(lanes):
@@ -355,8 +355,8 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 continue
             i = g[batch.G_ROW, l]
             if g[batch.G_STATUS, l] == 0:
-                for c in range(ns):
-                    s[i, c] = sb[c, l]
+                batch.store_lane(sb, f, l, s[i])
+                batch.rebase_angle(sb, f, l)
             done = _interval_end(i, s, d, st, cfg, out, f, g, l)
             if done or not whole or g[batch.G_STATUS, l] != 0:
                 g[G_INTEGRATE, l] = 0

@@ -158,7 +158,8 @@ class Buffers:
         self.trace = np.zeros((min(n_trace, n), k, T_BALLS + nb))
         self.active = np.ones(n, dtype=np.uint8)
         self.cfg = setup.cfg
-        self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV)
+        self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV,
+                                   precision=setup.config.precision)
         self.order = np.arange(n, dtype=np.int64)
         self.n_balls = nb
         self.spec = setup.spec

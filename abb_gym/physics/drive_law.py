@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 from .._numba import njit
+from . import elementary as el
 
 (D_T0, D_TH0, D_W0, D_ALPHA, D_MODE, D_TORQUE, D_GAIN, D_TW0, D_TALPHA, D_TLIM, D_WNL,
  D_PLIM) = range(12)
@@ -56,7 +57,7 @@ def prescribed_law(tau, th0, w0, alpha):
     """(angle [rad], speed [rad/s], acceleration [rad/s^2]) a time ``tau`` [s] into a
     prescribed row that starts at angle ``th0``, speed ``w0`` with acceleration ``alpha``
     (scalars only: the vector kernels call it inside their lane loops)."""
-    return th0 + w0 * tau + 0.5 * alpha * tau * tau, w0 + alpha * tau, alpha
+    return th0 + w0 * tau + el.like(alpha, 0.5) * alpha * tau * tau, w0 + alpha * tau, alpha
 
 
 @njit(cache=True, inline="always")
@@ -70,7 +71,7 @@ def available_torque(lim, w, no_load_speed, power):
     """Torque limit [N m] at speed ``w`` [rad/s]: ``lim`` falling linearly to 0 at
     ``no_load_speed`` and capped by ``|T w| <= power`` [W] (each only when > 0)."""
     if no_load_speed > 0.0:
-        lim *= max(0.0, 1.0 - abs(w) / no_load_speed)
+        lim *= max(el.like(lim, 0.0), el.like(lim, 1.0) - abs(w) / no_load_speed)
     if power > 0.0 and abs(w) * lim > power:
         lim = power / abs(w)
     return lim
@@ -102,13 +103,14 @@ def motor_law(tau, w, command, gain, w_target0, target_accel, limit, no_load_spe
 
 
 @njit(cache=True)
-def pin_prescribed(t, s, lane, d, nq):
+def pin_prescribed(t, s, lane, d, nq, angle_offset=0.0):
     """Set the rotor angle and speed of lane ``lane`` of state block ``s`` (state rows x
     lanes; a single state is a block of one lane) to the exact prescribed law of row ``d`` at
-    ``t``: no drift of a prescribed rotor angle over many steps."""
+    ``t``: no drift of a prescribed rotor angle over many steps.  ``angle_offset`` [rad]: the
+    block holds the rotor angle less this (a float32 block: :mod:`abb_gym.physics.batch`)."""
     if d[D_MODE] == MODE_PRESCRIBED:
         th, w, _ = prescribed_state(t, d)
-        s[2, lane] = th
+        s[2, lane] = th - angle_offset if angle_offset != 0.0 else th
         s[nq + 2, lane] = w
 
 

@@ -41,15 +41,67 @@ import llvmlite.binding as _llvm
 import numpy as np
 from llvmlite import ir as _ir
 from numba.core import types
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from .._numba import njit
 
 _llvm.set_option("abb_gym", "-unroll-threshold=2000")
 
-__all__ = ["sincos", "exp_bounded", "tanh", "SINCOS_LIMIT"]
+__all__ = ["sincos", "exp_bounded", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like",
+           "is_single"]
 
 SINCOS_LIMIT = 1.6e6
+SINCOS_LIMIT_F32 = 1.0e3
+
+
+# ------------------------------------------------------------------ precision
+def like(x, value):
+    """``value`` in the precision of ``x`` (a float32 or float64 scalar or array), in compiled
+    code only.  Kernels written once for both precisions spell every constant so
+    (``like(w, 2.0) * w``) and cast every value a float64 helper returns: numba types a bare
+    ``0.5`` as float64, float32 times float64 is float64, and a variable has one type in the
+    whole function, so one bare constant (or one ``x = 0.0`` that a branch later assigns a
+    float32) would turn a float32 kernel's arithmetic into float64.  In float64
+    ``like(x, c)`` is ``c`` itself: the float64 kernels are unchanged bit for bit."""
+    raise TypeError("like() is for compiled code")
+
+
+def _float_of(x):
+    ty = x.dtype if isinstance(x, types.Array) else x
+    if isinstance(ty, types.Float):
+        return ty
+    return None
+
+
+@overload(like, inline="always")
+def _like(x, value):
+    ty = _float_of(x)
+    if ty is None:
+        return None
+    cast = np.float32 if ty.bitwidth == 32 else np.float64
+
+    def impl(x, value):
+        return cast(value)
+    return impl
+
+
+def is_single(x):
+    """Whether ``x`` (a float scalar or array) is float32: a compile-time constant of compiled
+    code (the branch it guards is compiled away in the other precision)."""
+    raise TypeError("is_single() is for compiled code")
+
+
+@overload(is_single, inline="always")
+def _is_single(x):
+    ty = _float_of(x)
+    if ty is None:
+        return None
+    single = ty.bitwidth == 32
+
+    def impl(x):
+        return single
+    return impl
+
 
 _TWO_OVER_PI = 6.36619772367581382433e-01
 # pi/2 in three 33-bit parts (fdlibm): j * part is exact for |j| < 2^20
@@ -80,8 +132,8 @@ _ROUND_SHIFT_BITS = 0x4338000000000000
 
 
 @njit(cache=True, inline="always")
-def sincos(x):
-    """(sin x, cos x) without library calls (module docstring for the accuracy)."""
+def _sincos64(x):
+    """(sin x, cos x) of a float64 without library calls (module docstring for the accuracy)."""
     # np.floor (a float), not int() or math.floor (integers): AVX2 has no vector conversion
     # between doubles and 64-bit integers, and a scalar one stops LLVM from vectorising
     j = np.floor(x * _TWO_OVER_PI + 0.5)
@@ -165,11 +217,128 @@ def exp_bounded(y):
 
 
 @njit(cache=True, inline="always")
-def tanh(x):
-    """tanh x without library calls: ``u / (u + 2)`` with ``u = e^(2|x|) - 1`` evaluated without
+def _tanh64(x):
+    """tanh x of a float64 without library calls: ``u / (u + 2)`` with ``u = e^(2|x|) - 1`` evaluated without
     cancellation, so the relative error stays a few ulp down to the smallest x."""
     a = min(abs(x), 20.0)  # tanh(20) = 1 - 8e-18: 1 in double precision
     scale, p = _expm1_reduced(2.0 * a)
     u = scale * p + (scale - 1.0)
     t = u / (u + 2.0)
     return t if x >= 0.0 else -t
+
+
+# ------------------------------------------------------------------ float32
+# pi/2 in three parts whose products with a whole j < 2^11 are exact in float32 (the
+# Cody-Waite split of Cephes' sinf, doubled); the float32 kernels reduce the rotor angle to
+# [0, 2 pi) in float64 first (:mod:`abb_gym.physics.model`), so their arguments stay small
+_PIO2_1F = 1.5703125
+_PIO2_2F = 4.837512969970703125e-4
+_PIO2_3F = 7.54978995489188216e-8
+# Cephes sinf / cosf minimax polynomials on [-pi/4, pi/4]
+_S1F = -1.6666654611e-1
+_S2F = 8.3321608736e-3
+_S3F = -1.9515295891e-4
+_C1F = 4.166664568298827e-2
+_C2F = -1.388731625493765e-3
+_C3F = 2.443315711809948e-5
+# ln 2 in two parts (Cephes expf), 1.5 2^23 and its bits (float32 rounding to whole numbers)
+_LN2_HI_F = 0.693359375
+_LN2_LO_F = -2.12194440e-4
+_ROUND_SHIFT_F = 12582912.0
+_ROUND_SHIFT_BITS_F = 0x4B400000
+
+
+@intrinsic
+def _bits32(typingctx, x):
+    """The IEEE bits of a float32 as an int32."""
+    if not (isinstance(x, types.Float) and x.bitwidth == 32):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], _ir.IntType(32))
+    return types.int32(x), codegen
+
+
+@intrinsic
+def _float32(typingctx, i):
+    """The float32 whose IEEE bits are the low 32 bits of the integer ``i``."""
+    if not isinstance(i, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        v = args[0]
+        if i.bitwidth != 32:
+            v = builder.trunc(v, _ir.IntType(32))
+        return builder.bitcast(v, _ir.FloatType())
+    return types.float32(i), codegen
+
+
+@njit(cache=True, inline="always")
+def _sincos32(x):
+    """(sin x, cos x) of a float32, ``|x| <= SINCOS_LIMIT_F32`` (module docstring)."""
+    f = np.float32
+    j = np.floor(x * f(0.6366197723675814) + f(0.5))
+    r = ((x - j * f(_PIO2_1F)) - j * f(_PIO2_2F)) - j * f(_PIO2_3F)
+    z = r * r
+    s = r + r * z * (f(_S1F) + z * (f(_S2F) + z * f(_S3F)))
+    c = (f(1.0) - f(0.5) * z) + z * z * (f(_C1F) + z * (f(_C2F) + z * f(_C3F)))
+    q = j - f(4.0) * np.floor(f(0.25) * j)
+    swap = (q == f(1.0)) | (q == f(3.0))
+    sin_x = c if swap else s
+    cos_x = s if swap else c
+    sin_x = -sin_x if q >= f(2.0) else sin_x
+    cos_x = -cos_x if (q == f(1.0)) | (q == f(2.0)) else cos_x
+    return sin_x, cos_x
+
+
+@njit(cache=True, inline="always")
+def _tanh32(x):
+    """tanh x of a float32 (module docstring): ``u / (u + 2)``, ``u = e^(2|x|) - 1``."""
+    f = np.float32
+    a = min(abs(x), f(9.0))  # tanh(9) = 1 - 3e-8: 1 in float32
+    y = f(2.0) * a
+    n = np.floor(y * f(1.4426950408889634) + f(0.5))
+    r = (y - n * f(_LN2_HI_F)) - n * f(_LN2_LO_F)
+    # Taylor series of e^r - 1 to r^7/7!: truncation below 2e-8 relative on |r| <= 0.347
+    p = r * (f(1.0) + r * (f(0.5) + r * (f(1.0 / 6) + r * (f(1.0 / 24) + r * (
+        f(1.0 / 120) + r * (f(1.0 / 720) + r * f(1.0 / 5040)))))))
+    k = _bits32(n + f(_ROUND_SHIFT_F)) - _ROUND_SHIFT_BITS_F
+    scale = _float32((k + 127) << 23)
+    u = scale * p + (scale - f(1.0))
+    t = u / (u + f(2.0))
+    return t if x >= f(0.0) else -t
+
+
+# ------------------------------------------------------------------ by precision
+def _by_precision(f64, f32):
+    """A stub whose compiled calls go to ``f64`` or ``f32`` by the argument's type."""
+    def stub(x):
+        raise TypeError("compiled code only")
+
+    @overload(stub)
+    def _pick(x):
+        if isinstance(x, types.Float):
+            chosen = f32 if x.bitwidth == 32 else f64
+
+            def impl(x):
+                return chosen(x)
+            return impl
+        return None
+    return stub
+
+
+_sincos_any = _by_precision(_sincos64, _sincos32)
+_tanh_any = _by_precision(_tanh64, _tanh32)
+
+
+@njit(cache=True, inline="always")
+def sincos(x):
+    """(sin x, cos x) without library calls, in the precision of ``x`` (float64 or float32;
+    the module docstring states the accuracy and the argument range of each)."""
+    return _sincos_any(x)
+
+
+@njit(cache=True, inline="always")
+def tanh(x):
+    """tanh x without library calls, in the precision of ``x`` (float64 or float32)."""
+    return _tanh_any(x)

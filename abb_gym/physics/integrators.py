@@ -50,13 +50,13 @@ STATUS_WORK_LIMIT = 3  # solve_ivp used more right-hand sides than it was allowe
 
 # --------------------------------------------------------------------------- helpers
 @njit(cache=True)
-def enter_segment(t, s, lane, seg_d, nseg, j, nq):
+def enter_segment(t, s, lane, seg_d, nseg, j, nq, angle_offset=0.0):
     """Index of the drive segment that holds ``t``, moving on from segment ``j``; at every
     segment start passed, the prescribed rotor state of lane ``lane`` of state block ``s`` is
-    pinned to the exact drive law."""
+    pinned to the exact drive law (``angle_offset``: :func:`drive_law.pin_prescribed`)."""
     while j + 1 < nseg and seg_d[j + 1, dl.D_T0] <= t + 1e-12 * (1.0 + abs(t)):
         j += 1
-        dl.pin_prescribed(t, s, lane, seg_d[j], nq)
+        dl.pin_prescribed(t, s, lane, seg_d[j], nq, angle_offset)
     return j
 
 
@@ -91,16 +91,20 @@ def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
     n = s.shape[0]
     L = s.shape[1]
     k1, k2, k3, k4 = k[0], k[1], k[2], k[3]
+    # constants in the arrays' precision (float64 or float32: elementary.like)
+    half = el.like(h, 0.5)
+    two = el.like(h, 2.0)
+    six = el.like(h, 6.0)
     mdl.accelerations_block(t, s, p, b, d, k1, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            tmp[j, l] = s[j, l] + 0.5 * h[l] * k1[j, l]
+            tmp[j, l] = s[j, l] + half * h[l] * k1[j, l]
     for l in range(L):
-        tt[l] = t[l] + 0.5 * h[l]
+        tt[l] = t[l] + half * h[l]
     mdl.accelerations_block(tt, tmp, p, b, d, k2, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            tmp[j, l] = s[j, l] + 0.5 * h[l] * k2[j, l]
+            tmp[j, l] = s[j, l] + half * h[l] * k2[j, l]
     mdl.accelerations_block(tt, tmp, p, b, d, k3, work, nb, spec)
     for j in range(n):
         for l in range(L):
@@ -110,7 +114,7 @@ def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
     mdl.accelerations_block(tt, tmp, p, b, d, k4, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            new = s[j, l] + h[l] / 6.0 * (k1[j, l] + 2.0 * k2[j, l] + 2.0 * k3[j, l] + k4[j, l])
+            new = s[j, l] + h[l] / six * (k1[j, l] + two * k2[j, l] + two * k3[j, l] + k4[j, l])
             s[j, l] = new if active[l] != 0 else s[j, l]
 
 

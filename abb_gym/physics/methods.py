@@ -4,7 +4,7 @@ loading numba).  The methods themselves: :mod:`abb_gym.physics.integrators` (com
 from __future__ import annotations
 
 __all__ = ["METHOD_RK4", "METHOD_DOPRI5", "METHOD_ROS2", "METHOD_ETDRK4", "METHOD_IDS",
-           "FIXED_STEP", "COMPILED_METHODS", "SCIPY_METHODS", "METHODS"]
+           "FIXED_STEP", "COMPILED_METHODS", "SCIPY_METHODS", "METHODS", "PRECISIONS"]
 
 # integer ids the compiled kernels branch on
 METHOD_RK4 = 0
@@ -18,3 +18,6 @@ FIXED_STEP = ("rk4", "etdrk4", "ros2")
 COMPILED_METHODS = tuple(METHOD_IDS)
 SCIPY_METHODS = ("DOP853", "Radau", "RK45", "LSODA", "BDF")
 METHODS = COMPILED_METHODS + SCIPY_METHODS
+
+# arithmetic of the batched RK4 blocks (:mod:`abb_gym.physics.batch`, "Precision")
+PRECISIONS = ("float64", "float32")

@@ -207,12 +207,12 @@ def _ball_coupling(th, ph, m, r, ji, big_r, e, gam, ecc):
     s, c = el.sincos(th + ph)
     ci = mr * big_r - ji * big_r / r
     jt = ji + mr * big_r
-    sgp = 0.0
-    cgp = 0.0
+    sgp = el.like(th, 0.0)
+    cgp = el.like(th, 0.0)
     if ecc:
         sgp, cgp = el.sincos(gam - ph)
         ci += e * mr * cgp
-        jt += m * e * e + 2.0 * e * mr * cgp
+        jt += m * e * e + el.like(e, 2.0) * e * mr * cgp
     return -mr * s, mr * c, ci, ji * big_r * big_r / (r * r) + mr * big_r, jt, s, c, sgp, cgp
 
 
@@ -313,12 +313,12 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     wrel2 = (w + dph) * (w + dph)
     fx = mr * wrel2 * cp
     fy = mr * wrel2 * sp
-    fth = 0.0
+    fth = el.like(w, 0.0)
     fi = -beta * dph
     if ext and dlaw != 0.0:
         drag, slope = _fluids.race_drag(big_r * dph, dlaw, klin, kquad, reu, a0, a1, a2, a3,
                                         plateau)
-        fi -= drag * big_r
+        fi -= el.like(fi, drag) * big_r
     if ext and touch:
         fi += qc
     bx = colx
@@ -329,16 +329,16 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
         cy += e * m * ctg
         fx += e * m * ctg * w2
         fy += e * m * stg * w2
-        fth -= e * mr * sgp * dph * (2.0 * w + dph)
+        fth -= e * mr * sgp * dph * (el.like(w, 2.0) * w + dph)
         fi += mr * e * sgp * w2
     if ext and grav:
         # g m R sin(a - th - ph): the weight's component along the track
         fi += mr * (gy * cp - gx * sp)
     if roll or (ext and fric):
         # friction-type forces -coef R N with the race normal force N (module docstring)
-        kr = mur * mr * el.tanh(big_r * dph / ureg) if roll else 0.0
+        kr = mur * mr * el.tanh(big_r * dph / ureg) if roll else el.like(w, 0.0)
         if ext and fric:
-            kr += mr * friction_coefficient(big_r * dph, muk, mus, ufr, ustr)
+            kr += mr * el.like(w, friction_coefficient(big_r * dph, muk, mus, ufr, ustr))
         if ext and grav:
             # |N|: a ball that the weight presses onto the inner wall of the annulus
             # (N < 0) is still resisted; the sign comes from the velocity-dependent part
@@ -396,14 +396,14 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         if motor:
             th = s[2, l]
             w = s[nq + 2, l]
-            torque = dl.motor_law(tau, w, d[dl.D_TORQUE, l], d[dl.D_GAIN, l], d[dl.D_TW0, l],
-                                  d[dl.D_TALPHA, l], d[dl.D_TLIM, l], d[dl.D_WNL, l],
-                                  d[dl.D_PLIM, l], envelope)
-            alpha = 0.0
+            torque = el.like(x, dl.motor_law(
+                tau, w, d[dl.D_TORQUE, l], d[dl.D_GAIN, l], d[dl.D_TW0, l], d[dl.D_TALPHA, l],
+                d[dl.D_TLIM, l], d[dl.D_WNL, l], d[dl.D_PLIM, l], envelope))
+            alpha = el.like(x, 0.0)
         else:
             th, w, alpha = dl.prescribed_law(tau, d[dl.D_TH0, l], d[dl.D_W0, l],
                                              d[dl.D_ALPHA, l])
-            torque = 0.0
+            torque = el.like(x, 0.0)
         big_r = p[P_R, l]
         ureg = p[P_UREG, l]
         e = p[P_E, l]
@@ -413,15 +413,15 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         grav = ext and p[P_GRAV, l] != 0.0
         touch = ext and p[P_KC, l] != 0.0
         fric = ext and p[P_FRIC, l] != 0.0
-        dlaw = p[P_DLAW, l] if ext else 0.0
+        dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
         if touch:
             # pair forces first: the contact's radial part loads the race (friction, rolling)
             _contact.ball_contacts_lane(s, l, nq, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l],
                                         p[P_ZC, l], work, W_QC, W_NC)
         w2 = w * w
         sth, cth = el.sincos(th)
-        stg = 0.0
-        ctg = 0.0
+        stg = el.like(x, 0.0)
+        ctg = el.like(x, 0.0)
         if ecc:
             stg, ctg = el.sincos(th + gam)
         geometry = (big_r, ureg, e, gam, stg, ctg, gx, gy)
@@ -437,18 +437,19 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         fth = torque - p[P_BETA0, l] * w
         jt = p[P_J, l]
         # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
-        d00 = 0.0
-        d01 = 0.0
-        d10 = 0.0
-        d11 = 0.0
-        d02 = 0.0
-        d12 = 0.0
-        d20 = 0.0
-        d21 = 0.0
-        d22 = 0.0
-        g0 = 0.0
-        g1 = 0.0
-        g2 = 0.0
+        zero = el.like(x, 0.0)
+        d00 = zero
+        d01 = zero
+        d10 = zero
+        d11 = zero
+        d02 = zero
+        d12 = zero
+        d20 = zero
+        d21 = zero
+        d22 = zero
+        g0 = zero
+        g1 = zero
+        g2 = zero
         for i in range(nb):
             colx, coly, ci, ii, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
                 th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
@@ -464,7 +465,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             fth += fthi
             if not motor:
                 fi -= bth * alpha
-            inv = 1.0 / ii
+            inv = el.like(ii, 1.0) / ii
             work[i, W_FI, l] = fi
             work[i, W_BX, l] = bx
             work[i, W_BY, l] = by
@@ -551,9 +552,10 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
     return spec
 
 
-def make_work(n_balls: int, lanes: int = 1) -> np.ndarray:
-    """Scratch array for :func:`accelerations_block` (contact forces per ball and lane)."""
-    return np.zeros((n_balls, WORK_COLUMNS, lanes))
+def make_work(n_balls: int, lanes: int = 1, dtype=np.float64) -> np.ndarray:
+    """Scratch array for :func:`accelerations_block` (contact forces per ball and lane), in
+    the precision ``dtype`` of the right-hand side."""
+    return np.zeros((n_balls, WORK_COLUMNS, lanes), dtype=dtype)
 
 
 @njit(cache=True, error_model="numpy")
