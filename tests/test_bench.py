@@ -2,7 +2,10 @@
 import numpy as np
 
 from abb_gym import SpeedProfile
-from abb_gym.benchmarks.accuracy import Case, plot_work_precision, run_accuracy
+from abb_gym.benchmarks.accuracy import (BATCH_RUNS, Case, plot_work_precision,
+                                         precision_table, run_accuracy)
+
+ERRORS = ("peak_whirl_rel", "final_angle_deg", "trajectory_rel")
 
 
 def test_work_precision_rows_and_chart(tmp_path):
@@ -16,8 +19,29 @@ def test_work_precision_rows_and_chart(tmp_path):
     for method in ("rk4", "etdrk4", "ros2"):
         errs = [r["trajectory_rel"] for r in stable if r["method"] == method]
         assert errs[-1] < errs[0] / 100
+    # the batched RK4 in float64 is rk4's arithmetic: the same errors at every step; in
+    # float32 its peak whirl stays within 1e-4 of them (measured: 1e-6)
+    single = [r for r in stable if r["method"] == "rk4"]
+    batch64 = [r for r in stable if r["method"] == f"rk4 x{BATCH_RUNS} float64"]
+    batch32 = [r for r in stable if r["method"] == f"rk4 x{BATCH_RUNS} float32"]
+    # (the coarsest step, 4x the default, diverges in all three)
+    assert len(single) == len(batch64) == len(batch32) == 5
+    for a, b64, b32 in zip(single, batch64, batch32):
+        assert a["setting"] == b64["setting"] == b32["setting"]
+        assert [a[k] for k in ERRORS] == [b64[k] for k in ERRORS]
+        assert abs(b32["peak_whirl_rel"] - a["peak_whirl_rel"]) < 1e-4
     png = plot_work_precision(rows, tmp_path / "wp.png")
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_precision_table_compares_float32_with_float64_and_two_float64_controls():
+    rows = precision_table(["yoshida_odd"], kernel="specialised", progress=False)
+    (row,) = rows
+    # measured: 1.7e-7 and 2.3e-4 deg; the controls 6e-6 deg (a 1e-7 rad nudge) and 1e-3 deg
+    # (one step more per 10 ms)
+    assert row["peak_whirl_rel"] < 1e-5 and row["ball_angle_deg"] < 0.01 and row["within"]
+    assert 0 < row["nudged_float64_ball_angle_deg"] < 1e-3
+    assert 0 < row["finer_step_float64_ball_angle_deg"] < 0.1
 
 
 def test_speed_benchmark_parts_measure_what_they_name():
@@ -86,13 +110,13 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     assert main(["bench", "speed", "--quick", "--out", str(tmp_path)]) == 0
     total = rows_printed()
     # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
-    # general kernel, the batch simulation, then CartPole/single/speed-up once both are
-    # measured, 2 cold-start rows, the memory
+    # general kernel, float32, the batch simulation and its float32 row, then
+    # CartPole/single/speed-up once both are measured, 2 cold-start rows, the memory
     assert seen == [("run-up generic", 0), ("run-up specialised", 1), ("stepping", 2),
                     ("vector", 4), ("vector", 5), ("vector", 6), ("vector", 7),
-                    ("batch", 8), ("single", 9), ("cartpole", 9), ("cold", 12),
-                    ("memory", 14), ("effects", 15)]
-    assert total == 16
+                    ("vector", 8), ("batch", 9), ("batch", 10), ("single", 11),
+                    ("cartpole", 11), ("cold", 14), ("memory", 16), ("effects", 17)]
+    assert total == 18
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")
 

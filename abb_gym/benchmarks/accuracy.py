@@ -1,5 +1,12 @@
 """Work-precision benchmark: error against a DOP853 reference versus wall time, for every
-integrator over a range of steps or tolerances, on two scenes.  ``abb-gym bench accuracy``."""
+integrator over a range of steps or tolerances, on two scenes.  ``abb-gym bench accuracy``.
+
+The batched RK4 of :func:`abb_gym.physics.batch.run_batch` appears twice more, as its users
+(the vector environment, the tuner, parameter studies) run it: 64 copies of the run at once,
+wall time per run, in float64 (its errors equal ``rk4``'s: the same arithmetic) and in
+float32 (``precision="float32"``).  :func:`precision_table` compares float32 with float64 on
+a run-up of every shipped scene against the 1 % peak-whirl / 1 deg criterion under which
+float32 could become the default."""
 from __future__ import annotations
 
 import time
@@ -9,9 +16,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..physics import MotorDrive, SimulationError, SpeedProfile, load_scene, simulate
+from ..physics import MotorDrive, SimulationError, SpeedProfile, list_scenes, load_scene
 from ..physics import model as mdl
-from ..physics.simulate import default_step, drive_max_speed
+from ..physics import simulate
+from ..physics.simulate import Trajectory, default_step, drive_max_speed, initial_state
 
 OUTPUT_DT = 0.01  # s, the environments' control interval
 
@@ -48,7 +56,39 @@ def settings(scene, case: Case) -> list[tuple[str, dict]]:
     out += [("DOP853", {"rtol": r}) for r in (1e-4, 1e-6, 1e-8)]
     out += [("RK45", {"rtol": r}) for r in (1e-3, 1e-5, 1e-7)]
     out += [("Radau", {"rtol": r}) for r in (1e-3, 1e-5, 1e-7)]
+    out += [(f"rk4 x{BATCH_RUNS} {precision}", {"dt": h}) for precision in ("float64", "float32")
+            for h in steps]
     return out
+
+
+#: copies of a run that the batched rows integrate at once (a block of 32 lanes per core)
+BATCH_RUNS = 64
+
+
+def batch_run(scene, drive, t_out: np.ndarray, dt: float, precision: str,
+              runs: int = BATCH_RUNS, kernel: str | None = None,
+              state0: np.ndarray | None = None) -> Trajectory:
+    """``runs`` copies of ``simulate(scene, drive, method="rk4", dt=dt)`` at once through
+    :func:`abb_gym.physics.batch.run_batch` in ``precision`` (``kernel``: its argument), from
+    ``state0`` (default: the scene's initial state): the first copy's trajectory, with the
+    wall time per copy.  Raises SimulationError if the run failed."""
+    from ..physics import batch
+    s0 = initial_state(scene, drive) if state0 is None else np.asarray(state0, float)
+    s0 = np.repeat(s0[None], runs, axis=0)
+    _, rows = drive.segment_table(float(t_out[-1]), scene)
+    p, b = mdl.pack_parameters(scene)
+    out = np.empty((runs, len(t_out), s0.shape[1]))
+    status = np.zeros((runs, 4))
+    args = (s0, t_out, np.repeat(rows[None], runs, axis=0), np.full(runs, len(rows)),
+            np.repeat(p[None], runs, axis=0), np.repeat(b[None], runs, axis=0), dt, out, status)
+    start = time.perf_counter()
+    batch.run_batch(*args, precision=precision, kernel=kernel)
+    wall = time.perf_counter() - start
+    if status[0, 0] != 0:
+        raise SimulationError(f"batched rk4 ({precision}) failed at t = {status[0, 1]:.6g} s",
+                              float(status[0, 1]), f"state entry {int(status[0, 2])}")
+    return Trajectory(scene, np.asarray(t_out), out[0], f"rk4 {precision}", dt, wall / runs,
+                      int(status[0, 3]))
 
 
 def errors(tr, ref) -> dict[str, float]:
@@ -62,11 +102,15 @@ def errors(tr, ref) -> dict[str, float]:
     }
 
 
-def _timed(scene, case, method, kw, repeats):
+def _timed(scene, case, method, kw, repeats, t_out):
     best = np.inf
     tr = None
     for _ in range(repeats):
-        tr = simulate(scene, case.drive, case.t_end, method=method, output_dt=OUTPUT_DT, **kw)
+        if method.startswith("rk4 x"):
+            tr = batch_run(scene, case.drive, t_out, kw["dt"], method.split()[-1])
+        else:
+            tr = simulate(scene, case.drive, case.t_end, method=method, output_dt=OUTPUT_DT,
+                          **kw)
         best = min(best, tr.wall_time)
     return tr, best
 
@@ -82,19 +126,75 @@ def run_accuracy(cases: list[Case] | None = None, repeats: int = 3,
         scene = load_scene(case.scene)
         ref = simulate(scene, case.drive, case.t_end, method="DOP853", rtol=1e-12,
                        output_dt=OUTPUT_DT)
+        for precision in ("float64", "float32"):  # compile / load the batched kernels
+            batch_run(scene, case.drive, ref.t[:2], 1e-3, precision)
         todo = settings(scene, case)
         for method, kw in tqdm(todo, desc=f"accuracy {case.scene}", disable=not progress):
             setting = ", ".join(f"{k}={v:.3g}" for k, v in kw.items())
             row = {"scene": case.scene, "method": method, "setting": setting}
             try:
-                tr, wall = _timed(scene, case, method, kw,
-                                  repeats if method in ("rk4", "etdrk4", "dopri5", "ros2") else 1)
+                timed = method in ("rk4", "etdrk4", "dopri5", "ros2") or method.startswith("rk4 x")
+                tr, wall = _timed(scene, case, method, kw, repeats if timed else 1, ref.t)
                 row.update(stable=True, wall_ms_per_sim_s=1e3 * wall / case.t_end,
                            work=tr.work, **errors(tr, ref))
             except SimulationError:
                 row.update(stable=False, wall_ms_per_sim_s=np.nan, work=0,
                            peak_whirl_rel=np.nan, final_angle_deg=np.nan, trajectory_rel=np.nan)
             rows.append(row)
+    return rows
+
+
+#: the criterion under which float32 could become the default (issue "Vector simulation")
+FLOAT32_BOUNDS = {"peak_whirl_rel": 0.01, "ball_angle_deg": 1.0}
+
+
+def precision_table(scenes: list[str] | None = None, kernel: str = "generic",
+                    progress: bool = True) -> list[dict]:
+    """float32 against float64 on every shipped scene (or ``scenes``): a run-up at half the drive's largest
+    acceleration to the operating speed with a 0.3 s dwell at the critical speed, then 2 s at
+    speed, RK4 at the default step, one run in each precision (``kernel``, default the general
+    kernel: one compilation for every scene, the same numbers as the specialised ones).  Rows: the peak
+    whirl's relative difference, the largest ball-angle difference over the run [deg], the
+    rotor angle's [rad], whether the first two are within :data:`FLOAT32_BOUNDS`, the final
+    whirl radius in both precisions [m], and two controls that say how much of a difference
+    is the scene's own sensitivity: the largest ball-angle difference of a float64 run whose
+    first ball starts 1e-7 rad (float32's resolution of an angle near 1) away, and of a
+    float64 run with one step more per output interval.  Balls that lag the rotor for many turns amplify any such
+    difference; balls that travel as a clump and then part (an unstable equilibrium) go the
+    way the rounding at that moment tips them, and float32's rounding is 1e9 times float64's."""
+    rows = []
+    for name in tqdm(scenes or list_scenes(), desc="float32 against float64",
+                     disable=not progress):
+        scene = load_scene(name)
+        a = scene.drive_max_acceleration / 2
+        w = scene.drive_operating_speed
+        drive = SpeedProfile.dwell(a, scene.critical_speed, 0.3, 0.0, w)
+        t_end = w / a + 2.3
+        t_out = np.arange(0.0, t_end + 1e-9, OUTPUT_DT)
+        dt = default_step(scene, w)
+        run = {p: batch_run(scene, drive, t_out, dt, p, runs=1, kernel=kernel)
+               for p in ("float64", "float32")}
+        r64, r32 = run["float64"], run["float32"]
+        nudged = initial_state(scene, drive)
+        nudged[3] += 1e-7
+        # one step more per output interval than the default step takes
+        finer = OUTPUT_DT / (np.ceil(OUTPUT_DT / dt - 1e-9) + 1)
+        controls = (batch_run(scene, drive, t_out, dt, "float64", runs=1, kernel=kernel,
+                              state0=nudged),
+                    batch_run(scene, drive, t_out, finer, "float64", runs=1, kernel=kernel))
+        peak = float(abs(r32.whirl_radius.max() / r64.whirl_radius.max() - 1.0))
+        balls = float(np.degrees(np.abs(r32.ball_angles - r64.ball_angles).max()))
+        rows.append({"scene": name, "balls": scene.ball_count, "dt_ms": dt * 1e3,
+                     "t_end_s": t_end, "peak_whirl_rel": peak, "ball_angle_deg": balls,
+                     "rotor_angle_rad": float(np.abs(r32.rotor_angle - r64.rotor_angle).max()),
+                     "final_whirl_float64_m": float(r64.whirl_radius[-1]),
+                     "final_whirl_float32_m": float(r32.whirl_radius[-1]),
+                     "nudged_float64_ball_angle_deg": float(np.degrees(np.abs(
+                         controls[0].ball_angles - r64.ball_angles).max())),
+                     "finer_step_float64_ball_angle_deg": float(np.degrees(np.abs(
+                         controls[1].ball_angles - r64.ball_angles).max())),
+                     "within": bool(peak <= FLOAT32_BOUNDS["peak_whirl_rel"]
+                                    and balls <= FLOAT32_BOUNDS["ball_angle_deg"])})
     return rows
 
 

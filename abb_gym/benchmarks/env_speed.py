@@ -36,10 +36,11 @@ __all__ = ["measure", "vector_rate", "batch_rate", "single_rate", "cartpole_rate
            "cold_start"]
 
 
-def _make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4"):
+def _make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4",
+                 precision: str = "float64"):
     return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         scene=SCENE, control_interval=0.01, integrator=integrator,
-                        kernel=kernel, max_episode_steps=EPISODE_STEPS)
+                        precision=precision, kernel=kernel, max_episode_steps=EPISODE_STEPS)
 
 
 #: below this ratio of specialised to general vector-env speed the specialised kernel is not
@@ -61,10 +62,10 @@ def specialisation_note(specialised: float, general: float) -> str:
 
 
 def vector_rate(num_envs: int, n_steps: int, kernel: str | None = None,
-                integrator: str = "rk4", repeats: int = 1) -> dict:
+                integrator: str = "rk4", repeats: int = 1, precision: str = "float64") -> dict:
     """Env-steps per second of the native vector env (resets included) and the cost of one
-    sub-environment's reset [us] (best of ``repeats``)."""
-    env = _make_vector(num_envs, kernel, integrator)
+    sub-environment's reset [us] (best of ``repeats``), in the step's ``precision``."""
+    env = _make_vector(num_envs, kernel, integrator, precision)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = rng.uniform(0.2, 1.0, size=(n_steps, num_envs, 1)).astype(np.float32)
@@ -85,11 +86,12 @@ def vector_rate(num_envs: int, n_steps: int, kernel: str | None = None,
             "kernel": used}
 
 
-def batch_rate(n_runs: int, intervals: int, repeats: int = 1) -> float:
+def batch_rate(n_runs: int, intervals: int, repeats: int = 1,
+               precision: str = "float64") -> float:
     """Simulated 10 ms intervals per second of :func:`abb_gym.physics.batch.run_batch` over
     ``n_runs`` run-ups of the scene (half the drive's acceleration, ball drag spread over
     0.7-1.3 of nominal so that the runs take different step sizes), output every 10 ms (best
-    of ``repeats``; the first call compiles or loads the kernel)."""
+    of ``repeats``; the first call compiles or loads the kernel), in ``precision``."""
     from ..physics import SpeedProfile, batch, load_scene
     scene = load_scene(SCENE)
     w = scene.drive_operating_speed
@@ -101,11 +103,11 @@ def batch_rate(n_runs: int, intervals: int, repeats: int = 1) -> float:
     out = np.empty((n_runs, len(t_out), s0.shape[1]))
     status = np.zeros((n_runs, 4))
     args = (s0, t_out, seg_d, nseg, p, b, h, out, status)
-    batch.run_batch(*args)
+    batch.run_batch(*args, precision=precision)
     best = np.inf
     for _ in range(repeats):
         start = time.perf_counter()
-        batch.run_batch(*args)
+        batch.run_batch(*args, precision=precision)
         best = min(best, time.perf_counter() - start)
     if not np.all(status[:, 0] == 0):
         raise RuntimeError("batch benchmark: a run failed")
@@ -202,7 +204,7 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
     from tqdm import tqdm
     repeats = 1 if quick else 3
     steps = {64: 400, 1024: 100, 4096: 30} if not quick else {64: 40, 1024: 10, 4096: 5}
-    bar = tqdm(total=len(VECTOR_SIZES) + 6, desc="bench speed (environments)", leave=False)
+    bar = tqdm(total=len(VECTOR_SIZES) + 8, desc="bench speed (environments)", leave=False)
     note = f"{SCENE}, rk4 at the default step, random actions, {EPISODE_STEPS}-step episodes"
     try:
         vec = {}
@@ -219,6 +221,13 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
         yield {"measurement": "the same at 1024 with the general kernel (kernel='generic')",
                "value": f"{generic['rate']:,.0f} env-steps/s", "target": "-",
                "note": specialisation_note(vec[1024]["rate"], generic["rate"])}
+        vec32 = vector_rate(1024, steps[1024], "specialised", repeats=repeats,
+                               precision="float32")
+        bar.update()
+        yield {"measurement": "the same at 1024 in float32 (precision='float32')",
+               "value": f"{vec32['rate']:,.0f} env-steps/s", "target": "-",
+               "note": f"float32/float64 = {vec32['rate'] / vec[1024]['rate']:.2f}x; its "
+                       f"accuracy: abb-gym bench accuracy"}
         batch_runs = batch_rate(1024, 10 if quick else 100, repeats)
         bar.update()
         yield {"measurement": "batch simulation without an environment (physics.batch."
@@ -226,6 +235,11 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
                "value": f"{batch_runs:,.0f} run-intervals/s (10 ms each)", "target": "-",
                "note": "ball drag 0.7-1.3 of nominal, output every 10 ms; vector env at 1024 "
                        f"= {vec[1024]['rate'] / batch_runs:.2f}x of it"}
+        batch32 = batch_rate(1024, 10 if quick else 100, repeats, precision="float32")
+        bar.update()
+        yield {"measurement": "the same in float32 (precision='float32')",
+               "value": f"{batch32:,.0f} run-intervals/s", "target": "-",
+               "note": f"float32/float64 = {batch32 / batch_runs:.2f}x"}
         single = single_rate(3000 if quick else 30000, repeats)
         bar.update()
         cp_vec, cp_single = cartpole_rates(1024, 20 if quick else 200)

@@ -33,7 +33,8 @@ def _write_csv(rows, path: Path) -> None:
 
 
 def run_accuracy(args) -> int:
-    from ..benchmarks.accuracy import energy_drift, plot_work_precision, run_accuracy as bench
+    from ..benchmarks.accuracy import (energy_drift, plot_work_precision, precision_table,
+                                       run_accuracy as bench)
     if args.repeats < 1:  # "best of 0" has no best
         raise ValueError(f"--repeats must be >= 1 (got {args.repeats})")
     out = output_folder(args.out, "--out")
@@ -42,8 +43,12 @@ def run_accuracy(args) -> int:
     _write_csv(rows, out / "work_precision.csv")
     drift = energy_drift()
     _write_csv(drift, out / "energy_drift.csv")
+    f32 = precision_table()
+    _write_csv(f32, out / "float32.csv")
     text = ("## Work-precision\n\n" + markdown_table(rows) + "\n\n## Energy drift, undamped "
-            "free rotor\n\n" + markdown_table(drift) + "\n")
+            "free rotor\n\n" + markdown_table(drift) + "\n\n## float32 against float64, "
+            "every scene (a run-up through the critical speed; bounds 1 % peak whirl, 1 deg)"
+            "\n\n" + markdown_table(f32) + "\n")
     (out / "accuracy.md").write_text(text)
     print(text)
     print(f"wrote {png}, {out / 'work_precision.csv'}, {out / 'accuracy.md'}")
