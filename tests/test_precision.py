@@ -192,12 +192,10 @@ def _offset_round_trip(th_rows, f32_block, f):
     loaded = np.zeros(th_rows.size)
     back = np.zeros(th_rows.size)
     moved = np.zeros(th_rows.size)
-    dest = np.zeros(10)
     for r in range(th_rows.size):
         batch.load_lane(s_rows, p_rows, b_rows, r, f32_block, pb, bb, f, 0)
         loaded[r] = f32_block[2, 0]
-        batch.store_lane(f32_block, f, 0, dest)
-        back[r] = dest[2]
+        back[r] = batch.lane_value(f32_block, f, 0, 2)
         f32_block[2, 0] += np.float32(3.0)  # a step (less than a turn) that may cross one
         before = f32_block[2, 0] + f[batch.F_THOFF, 0]
         batch._keep_angle_small(f32_block, f, 0)

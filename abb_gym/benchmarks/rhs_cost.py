@@ -10,7 +10,8 @@ seconds each) and called in a compiled loop, so no Python or dispatch cost is co
 variant without the promise is compiled as the kernels were before it, with the large
 run-time overlap-check budget without which that loop would not vectorise at all
 (:func:`abb_gym._numba.allow_overlap_checks`, process wide: set by this benchmark, not by the
-package).  The
+package).  A third column times the no-alias variant on float32 arrays (the
+``precision="float32"`` option: :mod:`abb_gym.physics.batch`).  The
 environments run 4 right-hand sides per RK4 substep, 8 substeps per 10 ms control interval on
 ``yoshida_odd``.
 """
@@ -70,18 +71,22 @@ def _looped(noalias: bool) -> Specialised:
 def rhs_cost(scene: str = "yoshida_odd", lanes=LANES, calls: int = 2_000_000,
              repeats: int = 5) -> list[dict]:
     """Nanoseconds per right-hand side and lane (best of ``repeats``), with and without the
-    no-alias promise, for each block width in ``lanes``; ``calls`` lane-evaluations per timing.
-    Both variants give the same derivatives bit for bit (checked here)."""
+    no-alias promise, and with it in float32, for each block width in ``lanes``; ``calls``
+    lane-evaluations per timing.  The two float64 variants give the same derivatives bit for
+    bit (checked here)."""
     sc = load_scene(scene)
     spec = mdl.spec_of(mdl.pack_parameters(sc)[0], _drive_row(sc))
     allow_overlap_checks()
     variants = {"noalias": _looped(True), "plain": _looped(False)}
+    variants["float32"] = variants["noalias"]
     rows = []
     for n_lanes in lanes:
         row = {"scene": scene, "lanes": n_lanes}
         results = []
         for name, fn in variants.items():
             args = _inputs(sc, n_lanes, spec)
+            if name == "float32":
+                args = [a.astype(np.float32) if isinstance(a, np.ndarray) else a for a in args]
             fn(*args, 1)
             results.append(args[5].copy())
             n = max(2000, calls // n_lanes)
@@ -102,10 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     scene = argv[0] if argv else "yoshida_odd"
     if not NOALIAS:
         print("this numba does not take the noalias flag: both variants are the same")
-    print(f"{'lanes':>6} {'noalias [ns]':>13} {'plain [ns]':>11} {'speed-up':>9}  same result")
+    print(f"{'lanes':>6} {'noalias [ns]':>13} {'plain [ns]':>11} {'speed-up':>9}  same result"
+          f"  {'float32 [ns]':>12}")
     for r in rhs_cost(scene):
         print(f"{r['lanes']:6d} {r['noalias_ns']:13.1f} {r['plain_ns']:11.1f} "
-              f"{r['speedup']:8.2f}x  {r['same_result']}")
+              f"{r['speedup']:8.2f}x  {str(r['same_result']):>11}  {r['float32_ns']:12.1f}")
     return 0
 
 

@@ -221,7 +221,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         if self.setup.config.precision != "float64":
             raise ValueError(
                 f"precision = {self.setup.config.precision!r} is for the vector environment "
-                f"(gym.make_vec(..., vectorization_mode='vector_entry_point'), from 16 "
+                f"(gym.make_vec(..., vectorization_mode='vector_entry_point'), from 64 "
                 f"sub-environments): it computes 8 sub-environments per instruction, and one "
                 f"environment alone runs slower in float32 than in 'float64', the single "
                 f"environment's only precision")

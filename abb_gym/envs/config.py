@@ -190,8 +190,8 @@ class EnvConfig:
     integrator: str = declare("rk4", kind="choice", choices=INTEGRATORS,
                               doc="compiled fixed-step method (etdrk4: exact stiff drag)")
     precision: str = declare("float64", kind="choice", choices=PRECISIONS,
-                             doc="arithmetic of the compiled step: float32 (rk4 only) is "
-                                 "faster on many sub-environments, less accurate")
+                             doc="arithmetic of the vector environment's step: float32 (rk4 "
+                                 "only) is faster from 64 sub-environments, less accurate")
     integration_step: float | None = declare(None, unit="s", ge=1e-7, le=1.0, nullable=True,
                                              doc="step bound; null = default_step of each "
                                                  "episode")

@@ -355,7 +355,8 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 continue
             i = g[batch.G_ROW, l]
             if g[batch.G_STATUS, l] == 0:
-                batch.store_lane(sb, f, l, s[i])
+                for c in range(ns):
+                    s[i, c] = batch.lane_value(sb, f, l, c)
                 batch.rebase_angle(sb, f, l)
             done = _interval_end(i, s, d, st, cfg, out, f, g, l)
             if done or not whole or g[batch.G_STATUS, l] != 0:
