@@ -11,6 +11,29 @@ from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics.simulate import default_step, initial_state
 
 
+def rk4_references(cases, t_end, t_out, h):
+    """The batch inputs for ``cases`` [(scene, drive)] of one ball count, each with its own
+    ball start, and each case's single-run RK4 answer [(out, status)] at ``t_out``, step ``h``."""
+    n, nb = len(cases), cases[0][0].ball_count
+    ns = 2 * (3 + nb)
+    s0 = np.zeros((n, ns))
+    seg_d = np.zeros((n, 5, dl.N_DRIVE))
+    nseg = np.zeros(n, dtype=np.int64)
+    p = np.zeros((n, mdl.N_PARAMS))
+    b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
+    refs = []
+    for i, (sc, drive) in enumerate(cases):
+        s0[i] = initial_state(sc, drive, ball_angles0=np.linspace(0.2, 2.0, nb) * (i + 1))
+        seg_t, rows = drive.segment_table(t_end, sc)
+        seg_d[i, :len(rows)] = rows
+        nseg[i] = len(rows)
+        p[i], b[i] = mdl.pack_parameters(sc)
+        out = np.empty((len(t_out), ns))
+        status = rk4_run(s0[i], t_out, seg_t, rows, p[i], b[i], h, out)
+        refs.append((out, status))
+    return s0, seg_d, nseg, p, b, refs
+
+
 @pytest.mark.parametrize("scene_name, kernel", [
     ("yoshida_odd", "generic"), ("lu_hung_odd3", "generic"), ("spannan_discoidal", "generic"),
     # one vectorised case: each specialisation compiles for about a minute
@@ -34,24 +57,8 @@ def test_run_batch_equals_rk4_run(scene_name, kernel):
     t_out = np.linspace(0.0, t_end, 61)
     h = default_step(base, w)
     n = len(cases)
-    nb = base.ball_count
-    ns = 2 * (3 + nb)
-    s0 = np.zeros((n, ns))
-    seg_d = np.zeros((n, 5, dl.N_DRIVE))
-    nseg = np.zeros(n, dtype=np.int64)
-    p = np.zeros((n, mdl.N_PARAMS))
-    b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
-    refs = []
-    for i, (sc, drive) in enumerate(cases):
-        s0[i] = initial_state(sc, drive, ball_angles0=np.linspace(0.2, 2.0, nb) * (i + 1))
-        seg_t, rows = drive.segment_table(t_end, sc)
-        seg_d[i, :len(rows)] = rows
-        nseg[i] = len(rows)
-        p[i], b[i] = mdl.pack_parameters(sc)
-        out = np.empty((len(t_out), ns))
-        status = rk4_run(s0[i], t_out, seg_t, rows, p[i], b[i], h, out)
-        refs.append((out, status))
-    out = np.empty((n, len(t_out), ns))
+    s0, seg_d, nseg, p, b, refs = rk4_references(cases, t_end, t_out, h)
+    out = np.empty((n,) + refs[0][0].shape)
     status = np.zeros((n, 4))
     batch.run_batch(s0, t_out, seg_d, nseg, p, b, h, out, status, kernel=kernel)
     for i, (ref, st) in enumerate(refs):

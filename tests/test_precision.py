@@ -20,31 +20,15 @@ import abb_gym
 from abb_gym.envs.config import PresetError, load_preset
 from abb_gym.physics import batch, drive_law as dl, elementary as el, model as mdl
 from abb_gym.physics import integrators as integ
-from abb_gym.physics.integrators import rk4_run
-from abb_gym.physics.simulate import default_step, initial_state
+from abb_gym.physics.simulate import default_step
 from abb_gym.physics.specialise import Specialised
 
+from test_elementary import _sincos_all, _tanh_all
+from test_envs_batch import rk4_references
 from test_envs_vector import SHORT, SPEED
 
 
 # ------------------------------------------------------------------ elementary functions
-@njit(cache=False)
-def _sincos_all(x):
-    s = np.empty_like(x)
-    c = np.empty_like(x)
-    for i in range(x.size):
-        s[i], c[i] = el.sincos(x[i])
-    return s, c
-
-
-@njit(cache=False)
-def _tanh_all(x):
-    out = np.empty_like(x)
-    for i in range(x.size):
-        out[i] = el.tanh(x[i])
-    return out
-
-
 def _ulps32(got, ref):
     """|got - ref| in float32 units of the last place of ref (ref in float64)."""
     return np.abs(got.astype(np.float64) - ref) / np.spacing(np.abs(ref).astype(np.float32))
@@ -144,31 +128,17 @@ def test_run_batch_in_float32_follows_float64():
     t_end = 3.6 * base.critical_speed / (base.drive_max_acceleration / 2)
     t_out = np.linspace(0.0, t_end, 181)
     h = default_step(base, base.drive_operating_speed)
-    n, nb = len(cases), base.ball_count
-    ns = 2 * (3 + nb)
-    s0 = np.zeros((n, ns))
-    seg_d = np.zeros((n, 5, dl.N_DRIVE))
-    nseg = np.zeros(n, dtype=np.int64)
-    p = np.zeros((n, mdl.N_PARAMS))
-    b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
-    refs = []
-    for i, (sc, drive) in enumerate(cases):
-        s0[i] = initial_state(sc, drive, ball_angles0=np.linspace(0.2, 2.0, nb) * (i + 1))
-        seg_t, rows = drive.segment_table(t_end, sc)
-        seg_d[i, :len(rows)] = rows
-        nseg[i] = len(rows)
-        p[i], b[i] = mdl.pack_parameters(sc)
-        ref = np.empty((len(t_out), ns))
-        assert rk4_run(s0[i], t_out, seg_t, rows, p[i], b[i], h, ref)[0] == 0
-        refs.append(ref)
-    out = np.empty((n, len(t_out), ns))
-    status = np.zeros((n, 4))
+    nb = base.ball_count
+    s0, seg_d, nseg, p, b, refs = rk4_references(cases, t_end, t_out, h)
+    out = np.empty((len(cases),) + refs[0][0].shape)
+    status = np.zeros((len(cases), 4))
     # the specialised kernels (vectorised: float32's reason to be); the prescribed group's is
     # the one bench speed's batch row runs
     batch.run_batch(s0, t_out, seg_d, nseg, p, b, h, out, status, kernel="specialised",
                     precision="float32")
     assert np.all(status[:, 0] == 0)
-    for i, ref in enumerate(refs):
+    for i, (ref, st) in enumerate(refs):
+        assert st[0] == 0
         r, r_ref = np.hypot(out[i, :, 0], out[i, :, 1]), np.hypot(ref[:, 0], ref[:, 1])
         assert abs(r.max() / r_ref.max() - 1.0) < 1e-4, i
         assert np.abs(r - r_ref).max() < 1e-4 * r_ref.max(), i
