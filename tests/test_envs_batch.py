@@ -11,6 +11,22 @@ from abb_gym.physics.integrators import rk4_run
 from abb_gym.physics.simulate import default_step, initial_state
 
 
+def drive_cases(base):
+    """Four (scene, drive) cases around ``base``: a dwell and a ramp (prescribed rotor, the
+    second with more ball drag), constant torque (twice the eccentricity) and limited power."""
+    w = base.drive_operating_speed
+    a = base.drive_max_acceleration
+    crit = base.critical_speed
+    return [
+        (base, abb_gym.SpeedProfile.dwell(a / 2, crit, 0.3, 0.0, w)),
+        (base.replace(ball_drag=[1.3 * v for v in base.ball_drag]),
+         abb_gym.SpeedProfile.ramp(a, w)),
+        (base.replace(rotor_eccentricity=2 * base.rotor_eccentricity),
+         abb_gym.MotorDrive.constant_torque(0.5 * base.drive_torque_limit)),
+        (base, abb_gym.MotorDrive.limited_power(1e-3, abb_gym.SpeedProfile.ramp(a / 2, w))),
+    ]
+
+
 def rk4_references(cases, t_end, t_out, h):
     """The batch inputs for ``cases`` [(scene, drive)] of one ball count, each with its own
     ball start, and each case's single-run RK4 answer [(out, status)] at ``t_out``, step ``h``."""
@@ -40,22 +56,12 @@ def rk4_references(cases, t_end, t_out, h):
     ("yoshida_odd", "specialised")])
 def test_run_batch_equals_rk4_run(scene_name, kernel):
     base = abb_gym.load_scene(scene_name)
-    w = base.drive_operating_speed
-    a = base.drive_max_acceleration
-    crit = base.critical_speed
-    cases = [
-        (base, abb_gym.SpeedProfile.dwell(a / 2, crit, 0.3, 0.0, w)),
-        (base.replace(ball_drag=[1.3 * v for v in base.ball_drag]),
-         abb_gym.SpeedProfile.ramp(a, w)),
-        (base.replace(rotor_eccentricity=2 * base.rotor_eccentricity),
-         abb_gym.MotorDrive.constant_torque(0.5 * base.drive_torque_limit)),
-        (base, abb_gym.MotorDrive.limited_power(1e-3, abb_gym.SpeedProfile.ramp(a / 2, w))),
-    ]
+    cases = drive_cases(base)
     if kernel == "specialised":
         cases = cases[:2]  # the prescribed-rotor group only: one specialisation to compile
-    t_end = 1.2 * crit / (a / 2)
+    t_end = 1.2 * base.critical_speed / (base.drive_max_acceleration / 2)
     t_out = np.linspace(0.0, t_end, 61)
-    h = default_step(base, w)
+    h = default_step(base, base.drive_operating_speed)
     n = len(cases)
     s0, seg_d, nseg, p, b, refs = rk4_references(cases, t_end, t_out, h)
     out = np.empty((n,) + refs[0][0].shape)

@@ -24,7 +24,7 @@ from abb_gym.physics.simulate import default_step
 from abb_gym.physics.specialise import Specialised
 
 from test_elementary import _sincos_all, _tanh_all
-from test_envs_batch import rk4_references
+from test_envs_batch import drive_cases, rk4_references
 from test_envs_vector import SHORT, SPEED
 
 
@@ -104,27 +104,13 @@ def test_float32_equations_do_no_double_precision_arithmetic():
 
 
 # ------------------------------------------------------------------ batched runs
-def _cases(base):
-    w = base.drive_operating_speed
-    a = base.drive_max_acceleration
-    crit = base.critical_speed
-    return [
-        (base, abb_gym.SpeedProfile.dwell(a / 2, crit, 0.3, 0.0, w)),
-        (base.replace(ball_drag=[1.3 * v for v in base.ball_drag]),
-         abb_gym.SpeedProfile.ramp(a, w)),
-        (base.replace(rotor_eccentricity=2 * base.rotor_eccentricity),
-         abb_gym.MotorDrive.constant_torque(0.5 * base.drive_torque_limit)),
-        (base, abb_gym.MotorDrive.limited_power(1e-3, abb_gym.SpeedProfile.ramp(a / 2, w))),
-    ]
-
-
 def test_run_batch_in_float32_follows_float64():
     """Four 7 s run-ups through the critical speed (prescribed and motor, the rotor turning
     1,400-2,300 rad): float32 against the float64 reference (``rk4_run``).  Measured: peak
     whirl 1.3e-6 relative, ball angles 4e-4 deg, rotor angle 2.6e-5 rad.  Without the rotor
     angle's offset the float32 angle would lose about 1e-4 rad a step."""
     base = abb_gym.load_scene("yoshida_odd")
-    cases = _cases(base)
+    cases = drive_cases(base)
     t_end = 3.6 * base.critical_speed / (base.drive_max_acceleration / 2)
     t_out = np.linspace(0.0, t_end, 181)
     h = default_step(base, base.drive_operating_speed)
