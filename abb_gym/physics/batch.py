@@ -58,7 +58,7 @@ compute in float64 and return float32).  What float32 cannot hold is kept out of
   and speed and the motor's target speed evaluated in float64 at the piece start);
 * the rotor angle, which grows without bound, is held less whole turns: the block holds
   ``th - f[F_THOFF]`` in [0, 2 pi) when a lane is loaded (:func:`load_lane`) and within one
-  turn after every step (``_keep_angle_small``, exact), and :func:`lane_value` adds the
+  turn after every step (``_keep_angles_small``, exact), and :func:`lane_value` adds the
   float64 offset back.  The rest of the state returns to float64 at every output or control
   interval.
 
@@ -97,9 +97,11 @@ __all__ = ["advance_block", "run_batch", "run_inputs", "Blocks", "lanes_per_bloc
 # low-pass time constant [s], the reference mark's offset th_mark [rad], the filter state
 # (in and out) [m], the filter gain of the current piece's step
 (W_SYNC, W_LAG, W_MARK, W_ZX, W_ZY, W_GAIN) = range(14, 20)
-# a float32 block's rotor angle offset [rad] (below: "Precision")
+# a float32 block's rotor angle offset [rad] (below: "Precision"); the finiteness check of a
+# step (0 when every state entry of the lane is finite, NaN otherwise)
 F_THOFF = 20
-N_F = 21
+F_CHK = 21
+N_F = 22
 # g rows: taking part, still running, segment, segment count, steps left in the piece, step
 # index in the piece, status, first non-finite state entry, steps taken, environment row
 (G_ON, G_RUN, G_J, G_NSEG, G_LEFT, G_IX, G_STATUS, G_BAD, G_STEPS, G_ROW) = range(10)
@@ -210,20 +212,20 @@ def lane_value(s, f, lane, c):
 
 
 @njit(cache=True, inline="always")
-def _keep_angle_small(s, f, lane):
-    """Keep an integrated float32 rotor angle within one turn of [0, 2 pi) after each step
-    (its rounding grows with its size): a whole turn ``c`` (2 pi in float32) moves into the
-    offset.  ``th - c`` is exact for th in [c, 2c] (Sterbenz), which a step that turns the
-    rotor less than a turn keeps it in, so the angle's float64 value ``th + offset`` does not
-    change."""
+def _keep_angles_small(s, f, act):
+    """Keep the integrated float32 rotor angle of each lane with ``act`` set within one turn
+    of [0, 2 pi) after each step (its rounding grows with its size): a whole turn ``c`` (2 pi
+    in float32) moves into the offset.  ``th - c`` is exact for th in [c, 2c] (Sterbenz),
+    which a step that turns the rotor less than a turn keeps it in, so the angle's float64
+    value ``th + offset`` does not change."""
     c = el.like(s, TWO_PI)
-    th = s[2, lane]
-    if th >= c:
-        s[2, lane] = th - c
-        f[F_THOFF, lane] += c
-    elif th <= -c:
-        s[2, lane] = th + c
-        f[F_THOFF, lane] -= c
+    for l in range(s.shape[1]):
+        th = s[2, l]
+        off = f[F_THOFF, l]
+        up = act[l] != 0 and th >= c
+        down = act[l] != 0 and th <= -c
+        s[2, l] = th - c if up else (th + c if down else th)
+        f[F_THOFF, l] = off + c if up else (off - c if down else off)
 
 
 def _rk_clock(f, work, nb):
@@ -266,6 +268,47 @@ def _first_nonfinite_lane(s, lane):
         if not math.isfinite(s[j, lane]):
             return j
     return -1
+
+
+@njit(cache=True, inline="always")
+def _book_step(s, f, g, act, h, tc):
+    """After a step of the lanes with ``act`` set: count it, stop the lanes whose state is no
+    longer finite (status, first bad entry, failure time; ``act`` cleared), keep a float32
+    rotor angle small, and add the step to the whirl accumulators.  Lane loops without early
+    exits, so that they vectorise; only a lane that failed takes the scalar search."""
+    L = s.shape[1]
+    for l in range(L):
+        a = act[l]
+        g[G_STEPS, l] += a
+        g[G_IX, l] += a
+        g[G_LEFT, l] -= a
+        f[F_CHK, l] = 0.0
+    for j in range(s.shape[0]):
+        for l in range(L):
+            f[F_CHK, l] += s[j, l] - s[j, l]  # NaN from an infinite or NaN entry
+    for l in range(L):
+        if act[l] != 0 and not f[F_CHK, l] == 0.0:
+            g[G_STATUS, l] = integ.STATUS_NONFINITE
+            g[G_BAD, l] = _first_nonfinite_lane(s, l)
+            g[G_RUN, l] = 0
+            f[F_TFAIL, l] = tc[l] + h[l]
+            act[l] = 0
+    if el.is_single(s):
+        _keep_angles_small(s, f, act)
+    for l in range(L):
+        on = act[l] != 0
+        x = s[0, l]
+        y = s[1, l]
+        dx = x - f[W_XS, l]
+        dy = y - f[W_YS, l]
+        rd = math.sqrt(dx * dx + dy * dy)
+        r = math.sqrt(x * x + y * y)
+        w_int = f[W_INT, l]
+        w_dmax = f[W_DMAX, l]
+        w_max = f[W_MAX, l]
+        f[W_INT, l] = w_int + rd * h[l] if on else w_int
+        f[W_DMAX, l] = rd if on and rd > w_dmax else w_dmax
+        f[W_MAX, l] = r if on and r > w_max else w_max
 
 
 @njit(cache=True, error_model="numpy")
@@ -347,32 +390,7 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             integ._etdrk4_step(rt, rh, s, p, b, d, k, tmp, rtt, wb, lam, coef, act, nb, spec)
         else:
             integ._rk4_step(rt, rh, s, p, b, d, k, tmp, rtt, wb, act, nb, spec)
-        for l in range(L):
-            if act[l] == 0:
-                continue
-            g[G_STEPS, l] += 1
-            g[G_IX, l] += 1
-            g[G_LEFT, l] -= 1
-            bad = _first_nonfinite_lane(s, l)
-            if bad >= 0:
-                g[G_STATUS, l] = integ.STATUS_NONFINITE
-                g[G_BAD, l] = bad
-                g[G_RUN, l] = 0
-                f[F_TFAIL, l] = tc[l] + h[l]
-                continue
-            if single:
-                _keep_angle_small(s, f, l)
-            x = s[0, l]
-            y = s[1, l]
-            dx = x - f[W_XS, l]
-            dy = y - f[W_YS, l]
-            rd = math.sqrt(dx * dx + dy * dy)
-            f[W_INT, l] += rd * h[l]
-            if rd > f[W_DMAX, l]:
-                f[W_DMAX, l] = rd
-            r = math.sqrt(x * x + y * y)
-            if r > f[W_MAX, l]:
-                f[W_MAX, l] = r
+        _book_step(s, f, g, act, h, tc)
         if sync:
             # a loop of its own, free of early exits, so that it vectorises across the lanes
             for l in range(L):
