@@ -73,14 +73,14 @@ def batch_run(scene, drive, t_out: np.ndarray, dt: float, precision: str,
     ``state0`` (default: the scene's initial state): the first copy's trajectory, with the
     wall time per copy.  Raises SimulationError if the run failed."""
     from ..physics import batch
-    s0 = initial_state(scene, drive) if state0 is None else np.asarray(state0, float)
-    s0 = np.repeat(s0[None], runs, axis=0)
-    _, rows = drive.segment_table(float(t_out[-1]), scene)
-    p, b = mdl.pack_parameters(scene)
+    s0, seg_d, nseg, p, b, _ = batch.run_inputs([scene], drive, float(t_out[-1]),
+                                                scene.drive_operating_speed)
+    if state0 is not None:
+        s0 = np.asarray(state0, float)[None]
+    s0, seg_d, nseg, p, b = (np.repeat(a, runs, axis=0) for a in (s0, seg_d, nseg, p, b))
     out = np.empty((runs, len(t_out), s0.shape[1]))
     status = np.zeros((runs, 4))
-    args = (s0, t_out, np.repeat(rows[None], runs, axis=0), np.full(runs, len(rows)),
-            np.repeat(p[None], runs, axis=0), np.repeat(b[None], runs, axis=0), dt, out, status)
+    args = (s0, t_out, seg_d, nseg, p, b, dt, out, status)
     start = time.perf_counter()
     batch.run_batch(*args, precision=precision, kernel=kernel)
     wall = time.perf_counter() - start

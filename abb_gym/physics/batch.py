@@ -170,15 +170,21 @@ class Blocks:
 
 
 @njit(cache=True, inline="always")
+def _hold_angle(th, s, f, lane):
+    """Hold the float64 rotor angle ``th`` [rad] in a float32 block's lane as whole turns in
+    ``f[F_THOFF]`` plus the rest, in [0, 2 pi), in ``s`` (module docstring, "Precision")."""
+    off = TWO_PI * np.floor(th * (1.0 / TWO_PI))
+    f[F_THOFF, lane] = off
+    s[2, lane] = th - off
+
+
+@njit(cache=True, inline="always")
 def rebase_angle(s, f, lane):
     """Move whole turns of a float32 block's rotor angle into its offset ``f[F_THOFF]``, so
     that the float32 angle stays in [0, 2 pi) at the start of an interval (module docstring,
     "Precision"); nothing in a float64 block."""
     if el.is_single(s):
-        th = s[2, lane] + f[F_THOFF, lane]
-        off = TWO_PI * np.floor(th * (1.0 / TWO_PI))
-        f[F_THOFF, lane] = off
-        s[2, lane] = th - off
+        _hold_angle(s[2, lane] + f[F_THOFF, lane], s, f, lane)
 
 
 @njit(cache=True, inline="always")
@@ -194,10 +200,7 @@ def load_lane(s_rows, p_rows, b_rows, row, s, p, b, f, lane):
         for c in range(b.shape[1]):
             b[i, c, lane] = b_rows[row, i, c]
     if el.is_single(s):
-        th = s_rows[row, 2]
-        off = TWO_PI * np.floor(th * (1.0 / TWO_PI))
-        f[F_THOFF, lane] = off
-        s[2, lane] = th - off
+        _hold_angle(s_rows[row, 2], s, f, lane)
 
 
 @njit(cache=True, inline="always")
@@ -395,9 +398,8 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             # a loop of its own, free of early exits, so that it vectorises across the lanes
             for l in range(L):
                 if act[l] != 0 and g[G_STATUS, l] == integ.STATUS_OK and f[W_SYNC, l] != 0.0:
-                    th = s[2, l] + f[F_THOFF, l] if single else s[2, l]
                     ux, uy = sensors.demodulate(s[0, l] - f[W_XS, l], s[1, l] - f[W_YS, l],
-                                                th - f[W_MARK, l])
+                                                lane_value(s, f, l, 2) - f[W_MARK, l])
                     a = f[W_GAIN, l]
                     f[W_ZX, l] += a * (ux - f[W_ZX, l])
                     f[W_ZY, l] += a * (uy - f[W_ZY, l])
@@ -410,18 +412,18 @@ def _run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, order, lanes, 
     ns = s0.shape[1]
     nq = ns // 2
     nblk = (n_env + lanes - 1) // lanes
-    dt = precision.dtype  # the blocks' precision (an empty array of it)
+    dtype = precision.dtype  # the blocks' precision (an empty array of it)
     rows = nb + 1 if el.is_single(precision) else nb  # work_rows
     for q in prange(nblk):
-        s = np.zeros((ns, lanes), dt)
-        pb = np.zeros((p.shape[1], lanes), dt)
-        bb = np.zeros((nb, b.shape[2], lanes), dt)
-        d = np.zeros((dl.N_DRIVE, lanes), dt)
-        k = np.zeros((7, ns, lanes), dt)
-        tmp = np.zeros((ns, lanes), dt)
-        lam = np.zeros((ns, lanes), dt)
-        coef = np.zeros((6, ns, lanes), dt)
-        work = np.zeros((rows, mdl.WORK_COLUMNS, lanes), dt)
+        s = np.zeros((ns, lanes), dtype)
+        pb = np.zeros((p.shape[1], lanes), dtype)
+        bb = np.zeros((nb, b.shape[2], lanes), dtype)
+        d = np.zeros((dl.N_DRIVE, lanes), dtype)
+        k = np.zeros((7, ns, lanes), dtype)
+        tmp = np.zeros((ns, lanes), dtype)
+        lam = np.zeros((ns, lanes), dtype)
+        coef = np.zeros((6, ns, lanes), dtype)
+        work = np.zeros((rows, mdl.WORK_COLUMNS, lanes), dtype)
         f = np.zeros((N_F, lanes))
         g = np.zeros((N_G, lanes), dtype=np.int64)
         act = np.zeros(lanes, dtype=np.uint8)

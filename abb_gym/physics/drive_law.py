@@ -110,7 +110,7 @@ def pin_prescribed(t, s, lane, d, nq, angle_offset=0.0):
     block holds the rotor angle less this (a float32 block: :mod:`abb_gym.physics.batch`)."""
     if d[D_MODE] == MODE_PRESCRIBED:
         th, w, _ = prescribed_state(t, d)
-        s[2, lane] = th - angle_offset if angle_offset != 0.0 else th
+        s[2, lane] = th - angle_offset  # (exact, th itself, at no offset)
         s[nq + 2, lane] = w
 
 

@@ -245,8 +245,8 @@ def _tanh64(x):
 
 # ------------------------------------------------------------------ float32
 # pi/2 in three parts whose products with a whole j < 2^11 are exact in float32 (the
-# Cody-Waite split of Cephes' sinf, doubled); the float32 kernels reduce the rotor angle to
-# [0, 2 pi) in float64 first (:mod:`abb_gym.physics.model`), so their arguments stay small
+# Cody-Waite split of Cephes' sinf, doubled); a float32 block holds the rotor angle within a
+# turn of [0, 2 pi) (:mod:`abb_gym.physics.batch`, "Precision"), so the arguments stay small
 _PIO2_1F = 1.5703125
 _PIO2_2F = 4.837512969970703125e-4
 _PIO2_3F = 7.54978995489188216e-8
@@ -268,7 +268,7 @@ _ROUND_SHIFT_BITS_F = 0x4B400000
 def _sincos32(x):
     """(sin x, cos x) of a float32, ``|x| <= SINCOS_LIMIT_F32`` (module docstring)."""
     f = np.float32
-    j = np.floor(x * f(0.6366197723675814) + f(0.5))
+    j = np.floor(x * f(_TWO_OVER_PI) + f(0.5))
     r = ((x - j * f(_PIO2_1F)) - j * f(_PIO2_2F)) - j * f(_PIO2_3F)
     z = r * r
     s = r + r * z * (f(_S1F) + z * (f(_S2F) + z * f(_S3F)))
@@ -282,7 +282,7 @@ def _tanh32(x):
     f = np.float32
     a = min(abs(x), f(9.0))  # tanh(9) = 1 - 3e-8: 1 in float32
     y = f(2.0) * a
-    n = np.floor(y * f(1.4426950408889634) + f(0.5))
+    n = np.floor(y * f(_INV_LN2) + f(0.5))
     r = (y - n * f(_LN2_HI_F)) - n * f(_LN2_LO_F)
     # Taylor series of e^r - 1 to r^7/7!: truncation below 2e-8 relative on |r| <= 0.347
     p = r * (f(1.0) + r * (f(0.5) + r * (f(1.0 / 6) + r * (f(1.0 / 24) + r * (
