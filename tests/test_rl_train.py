@@ -8,7 +8,9 @@ minute on a 2-core machine).  Full training runs are opt-in (``--runslow``), see
 from __future__ import annotations
 
 import json
+import os
 import pickle
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +45,20 @@ SMOKE = {SPEED: {
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory, train_config):
     root = tmp_path_factory.mktemp("ppo")
-    assert train_config(SMOKE, root, seed=3) == 0
+    with pytest.MonkeyPatch.context() as mp:
+        # the run's temporary folder, to see that training leaves nothing there
+        mp.setattr(tempfile, "tempdir", str(tmp_path_factory.mktemp("tempdir")))
+        mp.delenv("SB3_LOGDIR", raising=False)
+        assert train_config(SMOKE, root, seed=3) == 0
+        (root / "tempdir_after.txt").write_text("\n".join(os.listdir(tempfile.tempdir)))
     return root / "run"
+
+
+def test_training_leaves_no_folder_in_the_temporary_directory(smoke_run):
+    # SB3's default logger made an empty tempdir/SB3-<time> folder per run (886 of them in
+    # this machine's /tmp)
+    left = (smoke_run.parent / "tempdir_after.txt").read_text().split()
+    assert not [name for name in left if name.startswith("SB3-")], left
 
 
 def test_every_shipped_config_loads():

@@ -381,6 +381,11 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     algorithm = algorithm_class(cfg.algo)
     model = algorithm(policy_class(cfg.policy), env, seed=int(seed), device="cpu",
                       verbose=verbose, **ppo_kw)
+    if tb_dir is None:
+        # without a logger of its own, SB3 makes an empty folder tempdir/SB3-<time> on every
+        # learn(): this one writes where SB3's default would (stdout when verbose), nowhere else
+        from stable_baselines3.common.logger import configure
+        model.set_logger(configure(str(run_dir), ["stdout"] if verbose else []))
     if warm is not None:
         meta["init_from"] = load_warm_start(model, env, warm)
     write_config(run_dir, cfg, meta)
