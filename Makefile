@@ -33,8 +33,15 @@ $(VENV)/.installed: $(VENV)/.created pyproject.toml constraints.txt
 demo: $(VENV)/.installed-core
 	$(PY) -m abb_gym.cli demo --out out/demo
 
+# the test files in TEST_WORKERS processes (pytest-xdist; a file's tests stay together, so a
+# module's fixtures run once): on this 2-core machine a fresh clone's run takes 8 minutes
+# instead of 12, most of it numba compiling kernels, which one process does on one core.
+# TEST_WORKERS=0 runs everything in one process
+TEST_WORKERS ?= 2
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
+
 test: setup
-	$(PY) -m pytest -q --runwheel
+	$(PY) -m pytest -q --runwheel $(XDIST)
 
 test-slow: setup
 	$(PY) -m pytest -q --runslow
@@ -50,7 +57,7 @@ fuzz: setup
 N ?= 20
 repeat: setup
 	for i in $$(seq 1 $(N)); do echo "run $$i of $(N)"; \
-		$(PY) -m pytest -q -p no:cacheprovider --runwheel || exit 1; done
+		$(PY) -m pytest -q -p no:cacheprovider --runwheel $(XDIST) || exit 1; done
 
 bench: setup
 	$(PY) -m abb_gym.cli bench speed
