@@ -152,7 +152,7 @@ def _offset_round_trip(th_rows, f32_block, f):
         back[r] = batch.lane_value(f32_block, f, 0, 2)
         f32_block[2, 0] += np.float32(3.0)  # a step (less than a turn) that may cross one
         before = f32_block[2, 0] + f[batch.F_THOFF, 0]
-        batch._keep_angles_small(f32_block, f, np.ones(1, np.uint8))
+        batch._keep_angles_small(f32_block, f, np.ones(1, np.uint8), 1)
         moved[r] = (f32_block[2, 0] + f[batch.F_THOFF, 0]) - before
     return loaded, back, moved
 
@@ -169,7 +169,7 @@ def test_the_float32_rotor_angle_lives_in_one_turn_plus_a_float64_offset():
     assert np.array_equal(moved, np.zeros_like(th))
     # a lane that did not take the step keeps its angle and offset, even past a turn
     block, f = np.full((10, 2), np.float32(7.0)), np.ones((batch.N_F, 2))
-    batch._keep_angles_small(block, f, np.array([1, 0], np.uint8))
+    batch._keep_angles_small(block, f, np.array([1, 0], np.uint8), 2)
     assert list(block[2]) == [np.float32(7.0) - np.float32(2 * np.pi), 7.0]
     assert list(f[batch.F_THOFF]) == [1.0 + float(np.float32(2 * np.pi)), 1.0]
 

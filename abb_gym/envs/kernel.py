@@ -29,7 +29,7 @@ from numba.experimental import structref  # noqa: E402  (after .._numba: the cac
 
 from ..physics.specialise import Specialised
 
-from ..physics import batch, rotor, runup, sensors
+from ..physics import batch, model, rotor, runup, sensors
 from ..physics import drive_law as dl
 from . import actions
 from .layout import *  # noqa: F401,F403  (the column names are the kernel's vocabulary)
@@ -317,9 +317,9 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
     """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``)."""
     n_env = order.shape[0]
-    lanes = bs.shape[2]
     ns = s.shape[1]
     sb = bs[q]
+    lanes = model.lanes_of(sb, spec)
     pb = bp[q]
     bbq = bb[q]
     f = bf[q]

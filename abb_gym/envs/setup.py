@@ -162,7 +162,9 @@ class Buffers:
                                    precision=setup.config.precision)
         self.order = np.arange(n, dtype=np.int64)
         self.n_balls = nb
-        self.spec = setup.spec
+        # blocks of one lane (a single environment, a few sub-environments): the kernel also
+        # takes the lane count as a constant
+        self.spec = setup.spec | (mdl.SPEC_ONE_LANE if self.blocks.lanes == 1 else 0)
         self.kernel = resolve_kernel(kernel, self.blocks.lanes, cached_ok=True)
         self._step = None
         if self.kernel == "cached":

@@ -215,14 +215,14 @@ def lane_value(s, f, lane, c):
 
 
 @njit(cache=True, inline="always")
-def _keep_angles_small(s, f, act):
+def _keep_angles_small(s, f, act, L):
     """Keep the integrated float32 rotor angle of each lane with ``act`` set within one turn
     of [0, 2 pi) after each step (its rounding grows with its size): a whole turn ``c`` (2 pi
     in float32) moves into the offset.  ``th - c`` is exact for th in [c, 2c] (Sterbenz),
     which a step that turns the rotor less than a turn keeps it in, so the angle's float64
     value ``th + offset`` does not change."""
     c = el.like(s, TWO_PI)
-    for l in range(s.shape[1]):
+    for l in range(L):
         th = s[2, l]
         off = f[F_THOFF, l]
         up = act[l] != 0 and th >= c
@@ -274,12 +274,12 @@ def _first_nonfinite_lane(s, lane):
 
 
 @njit(cache=True, inline="always")
-def _book_step(s, f, g, act, h, tc):
+def _book_step(s, f, g, act, h, tc, L):
     """After a step of the lanes with ``act`` set: count it, stop the lanes whose state is no
     longer finite (status, first bad entry, failure time; ``act`` cleared), keep a float32
     rotor angle small, and add the step to the whirl accumulators.  Lane loops without early
-    exits, so that they vectorise; only a lane that failed takes the scalar search."""
-    L = s.shape[1]
+    exits, so that they vectorise; only a lane that failed takes the scalar search.  ``L``:
+    the lane count (:func:`abb_gym.physics.model.lanes_of`)."""
     for l in range(L):
         a = act[l]
         g[G_STEPS, l] += a
@@ -297,7 +297,7 @@ def _book_step(s, f, g, act, h, tc):
             f[F_TFAIL, l] = tc[l] + h[l]
             act[l] = 0
     if el.is_single(s):
-        _keep_angles_small(s, f, act)
+        _keep_angles_small(s, f, act, L)
     for l in range(L):
         on = act[l] != 0
         x = s[0, l]
@@ -329,7 +329,7 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
     rest position, ``f[W_DMAX]`` its maximum, ``f[W_MAX]`` the largest whirl radius
     ``sqrt(x^2 + y^2)`` from the bearing axis.
     """
-    L = s.shape[1]
+    L = mdl.lanes_of(s, spec)
     nq = 3 + nb
     single = el.is_single(s)
     wb = work[:nb]
@@ -393,7 +393,7 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             integ._etdrk4_step(rt, rh, s, p, b, d, k, tmp, rtt, wb, lam, coef, act, nb, spec)
         else:
             integ._rk4_step(rt, rh, s, p, b, d, k, tmp, rtt, wb, act, nb, spec)
-        _book_step(s, f, g, act, h, tc)
+        _book_step(s, f, g, act, h, tc, L)
         if sync:
             # a loop of its own, free of early exits, so that it vectorises across the lanes
             for l in range(L):

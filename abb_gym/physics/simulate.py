@@ -578,7 +578,7 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         run = integ.run if specialised else integ.run.generic
         status, t_fail, bad, work = run(
             METHOD_IDS[method], s0, t_out, seg_t, seg_d, p, b, float(dt), float(rtol),
-            atol_arr, out, b.shape[0], mdl.spec_of(p, seg_d))
+            atol_arr, out, b.shape[0], mdl.spec_of(p, seg_d) | mdl.SPEC_ONE_LANE)
         if method in FIXED_STEP:
             # the step actually taken: an output interval is split into equal steps <= dt
             interval = t_out[1] - t_out[0]
