@@ -138,3 +138,19 @@ def test_no_compiled_call_passes_a_literal_argument_beside_star_arguments():
         found += [f"{path.relative_to(package)}: {c}"
                   for c in _calls_with_literal_beside_star_arguments(ast.parse(path.read_text()))]
     assert found == []
+
+
+@pytest.mark.parametrize("n_envs, one_lane", [(1, True), (3, True), (4, False), (64, False)])
+def test_blocks_of_one_lane_tell_the_kernel_so(n_envs, one_lane):
+    """Buffers whose blocks have one lane add SPEC_ONE_LANE to the literal effect bits (the
+    lane count then compiles as the constant 1); wider blocks keep the scene's effects only."""
+    from abb_gym.physics import model as mdl
+    setup = EnvSetup("speed", "yoshida_odd", "train")
+    b = Buffers(setup, n_envs, kernel="generic")
+    assert (b.blocks.lanes == 1) == one_lane
+    assert b.spec == setup.spec | (mdl.SPEC_ONE_LANE if one_lane else 0)
+    assert setup.spec & mdl.SPEC_ONE_LANE == 0
+    lanes = njit(lambda s, spec: mdl.lanes_of(s, spec))
+    block = np.zeros((10, 8))
+    assert lanes(block, setup.spec) == 8
+    assert lanes(block, setup.spec | mdl.SPEC_ONE_LANE) == 1
