@@ -16,7 +16,7 @@ import numpy as np
 from gymnasium import logger
 from gymnasium.utils import seeding
 
-from .actions import as_action_array
+from .actions import checked_action
 from .display import SINGLE_METADATA, check_display
 from .info import step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
@@ -331,9 +331,10 @@ class BalancerEnv(SetupAccess, gym.Env):
             logger.warn("step() called after the episode ended (terminated or truncated); "
                         "it returns the last observation with reward 0 - call reset()")
             self._warned_done = True
-        a = as_action_array(action, self.action_space.shape)
+        a = checked_action(action, self.action_space.shape)
         extra = None
         if not self._done and self.setup.actions.works_before_step:
+            a = a.astype(np.float64, copy=False)
             self._check_finite(a, action)
             clipped = np.clip(a, -1.0, 1.0)
             if np.any(clipped != a):
@@ -343,7 +344,7 @@ class BalancerEnv(SetupAccess, gym.Env):
                                                    float(self._table.imbalance_phase[0]))
             if extra:
                 self.last_profile = extra.pop("profile", None)
-        self._act_row[:] = a
+        self._act_row[...] = a  # (in place, converted to float64; [:] cost 0.3 us more)
         step = self._step_fn
         if step is None:
             step = self._step_fn = self._bufs.step_function()
