@@ -165,6 +165,45 @@ def test_lean_info_holds_the_reward_terms_and_the_final_metrics():
         gym.make("abb_gym/RunUpSpeed-v0", info_level="verbose")
 
 
+def test_lean_info_measures_the_residual_imbalance_only_where_it_shows_it():
+    """At "lean" the step measures the residual imbalance only for the sub-environments whose
+    episode ends (their values equal a full-info twin's; the masked entries read 0), and a
+    level set between steps is checked and takes effect at the next step."""
+    kw = dict(scene="yoshida_odd", max_episode_steps=40)
+    lean, full = make_vec(SPEED, 3, info_level="lean", **kw), make_vec(SPEED, 3, **kw)
+    # the middle sub-environment's imbalance throws it into the housing at step 18
+    options = {"imbalance_ratio": [0.5, 2000.0, 0.5]}
+    lean.reset(seed=2, options=options)
+    full.reset(seed=2, options=options)
+    ended = []
+    for k in range(40):
+        _, r_lean, te, tr, lean_info = lean.step(np.full((3, 1), 1.0))
+        _, r_full, _, _, full_info = full.step(np.full((3, 1), 1.0))
+        assert np.array_equal(r_lean, r_full)
+        done = te | tr
+        if done.any():
+            ended.append(done.tolist())
+            for key in ("residual_imbalance_ratio", "balanced"):
+                assert np.array_equal(lean_info[key][done], full_info[key][done])
+                assert not lean_info[key][~done].any()
+            assert (lean_info["residual_imbalance_ratio"][done] > 0).all()
+    assert ended == [[False, True, False], [True, False, True]]
+    single, twin = (gym.make(SPEED, info_level=level, **kw) for level in ("lean", "full"))
+    single.reset(seed=1)
+    twin.reset(seed=1)
+    for k in range(5):
+        _, _, _, _, info = single.step(np.array([1.0]))
+        _, _, _, _, twin_info = twin.step(np.array([1.0]))
+    assert "balanced" not in info
+    with pytest.raises(ValueError, match="info_level must be one of"):
+        single.unwrapped.info_level = "verbose"
+    single.unwrapped.info_level = "full"
+    _, _, _, _, info = single.step(np.array([1.0]))
+    _, _, _, _, twin_info = twin.step(np.array([1.0]))
+    assert info["residual_imbalance_ratio"] == twin_info["residual_imbalance_ratio"] > 0
+    assert info["balanced"] == twin_info["balanced"]
+
+
 def test_make_vec_returns_native_vector_env():
     for env_id in ENV_IDS:
         vec = make_vec(env_id, 4)

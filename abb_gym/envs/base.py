@@ -142,7 +142,10 @@ COMMON_DOC = textwrap.dedent(r"""
     ``failure`` when one happens): the step of a training loop pays for nothing else.  The
     step that ends an episode (terminated or truncated), and ``reset``, carry every key below,
     so the final info always holds the run-up metrics.  ``info_level="full"`` gives every key at
-    every step.
+    every step.  ``env.unwrapped.info_level`` may be changed between steps (a bad value is a
+    ValueError naming the levels).  At "lean" the step measures the residual imbalance
+    (``balanced``, ``residual_imbalance_ratio``: two sin/cos per ball) only for the step that
+    ends an episode.
 
     | Key | Meaning |
     |-----|---------|
@@ -215,9 +218,10 @@ class BalancerEnv(SetupAccess, gym.Env):
                  observe_balls: bool = False, render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
                  info_level: str = "lean", **overrides: Any):
-        self.info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
+        info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
+        self.info_level = info_level
         if self.setup.config.precision != "float64":
             raise ValueError(
                 f"precision = {self.setup.config.precision!r} is for the vector environment "

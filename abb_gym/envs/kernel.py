@@ -55,8 +55,9 @@ def _clip(v, lo, hi):
 
 
 @njit(cache=True)
-def _observe(i, s, p, b, st, cfg, obs, out, trace):
-    """Write the observation row ``obs[i]``, the whirl radius and balance outputs, the trace."""
+def _observe(i, s, p, b, st, cfg, obs, out, trace, balance):
+    """Write the observation row ``obs[i]``, the whirl radius outputs, the trace, and with
+    ``balance`` the balance outputs (for an info that shows them: EnvSetup.set_info_level)."""
     nq = s.shape[1] // 2
     nb = nq - 3
     x = s[i, 0]
@@ -99,7 +100,8 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace):
             obs[i, c + 1 + 2 * k] = math.sin(ph)
     out[i, O_R] = math.sqrt(x * x + y * y)
     out[i, O_RDYN] = math.sqrt(dx * dx + dy * dy)
-    _balance(i, s, p, b, st, cfg, out)
+    if balance:
+        _balance(i, s, p, b, st, cfg, out)
     if i < trace.shape[0]:
         k = int(st[i, S_K])
         if k < trace.shape[1]:
@@ -255,7 +257,7 @@ def _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
         # stepping a finished episode: nothing moves, no reward (the caller warns)
         out[i, O_TERM] = st[i, S_TERM]
         out[i, O_TRUNC] = st[i, S_TRUNC]
-        _observe(i, s, p, b, st, cfg, obs, out, trace)
+        _observe(i, s, p, b, st, cfg, obs, out, trace, True)
         return False
     na = int(cfg[C_NACT])
     for a in range(na):
@@ -302,7 +304,7 @@ def _finish(i, done, s, p, b, st, cfg, obs, out, trace):
         st[i, S_DONE] = 1.0
         st[i, S_TERM] = out[i, O_TERM]
         st[i, S_TRUNC] = out[i, O_TRUNC]
-    _observe(i, s, p, b, st, cfg, obs, out, trace)
+    _observe(i, s, p, b, st, cfg, obs, out, trace, done or cfg[C_INFO_FULL] != 0.0)
 
 
 # rows of the block's integer array that the environment step uses (beyond batch.N_G)
@@ -363,7 +365,7 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 g[G_INTEGRATE, l] = 0
                 g[G_DONE, l] = 1 if done else 0
             else:
-                _observe(i, s, p, b, st, cfg, obs, out, trace)  # fills the render trace
+                _observe(i, s, p, b, st, cfg, obs, out, trace, False)  # the render trace
     for l in range(lanes):
         if g[G_STEPPING, l] != 0:
             _finish(g[batch.G_ROW, l], g[G_DONE, l] != 0, s, p, b, st, cfg, obs, out, trace)
@@ -458,4 +460,4 @@ def observe_rows(rows, s, p, b, st, cfg, obs, out, trace):
         i = rows[r]
         for c in range(out.shape[1]):
             out[i, c] = 0.0
-        _observe(i, s, p, b, st, cfg, obs, out, trace)
+        _observe(i, s, p, b, st, cfg, obs, out, trace, True)

@@ -21,7 +21,10 @@ from ..physics.runup import N_ACC
 (C_SYNC, C_SYNC_LAG, C_SYNC_NOISE) = range(27, 30)
 # the time fraction in the observation: on (1) or off (0)
 C_OBS_TIME = 30
-N_CFG = 31
+# every step's info shows the residual imbalance (info_level "full": 1) or only an episode's
+# last (0): the step measures it only when shown
+C_INFO_FULL = 31
+N_CFG = 32
 # ---------------------------------------------------------------- st: per-environment state
 # S_ACC .. S_ACC + runup.N_ACC - 1: the run-up metrics accumulator (abb_gym.physics.runup)
 (S_K, S_FILT, S_PEAK, S_DONE, S_TERM, S_TRUNC, S_AREF, S_AOP, S_USCALE, S_UBEST, S_DTMAX,

@@ -28,11 +28,12 @@ from . import episodes
 from .actions import ActionModel, action_model
 from ..configuration import specs
 from .config import EnvConfig, PresetError, load_preset
+from .display import check_info_level
 from . import kernel
 from .kernel import N_G_ENV, observe_rows
-from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT, C_KIND,
-                     C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OBS_TIME, C_OVERSPEED, C_SETTLE,
-                     C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM,
+from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT,
+                     C_INFO_FULL, C_KIND, C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OBS_TIME,
+                     C_OVERSPEED, C_SETTLE, C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM,
                      C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP, C_WR, C_WT, C_WV,
                      FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG, N_OUT, N_ST,
                      O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T, T_VIB,
@@ -387,6 +388,7 @@ class EnvSetup:
         c[C_SYNC_NOISE] = sync.noise * self.vibration_scale  # [m]
         c[C_OBS_TIME] = 1.0 if self.observe_time else 0.0
         self.cfg = c
+        self.set_info_level("lean")
         self._state_names = state_names(nb)
         # the compiled step's effect set: the nominal scene's (an episode only rescales the
         # scene's drag, rolling resistance, mass and support damping, so it never needs a term
@@ -414,6 +416,13 @@ class EnvSetup:
         episodes.commit(bufs, table, self.prepare_rows(table, rows, rngs, options))
 
     # ------------------------------------------------------------------ info
+    def set_info_level(self, level: str) -> None:
+        """Whether every step's info shows the residual imbalance (``level`` "full") or only
+        an episode's last ("lean"): the compiled step measures it (two sin/cos per ball) only
+        for the steps that show it; in the others ``balanced`` and
+        ``residual_imbalance_ratio`` are 0, like any masked entry of a vector info."""
+        self.cfg[C_INFO_FULL] = 1.0 if level == "full" else 0.0
+
     def failure_message(self, code: int, out_row: np.ndarray, st_row: np.ndarray,
                         s_row: np.ndarray) -> str:
         t = out_row[O_FTIME]
@@ -434,9 +443,21 @@ class EnvSetup:
 
 
 class SetupAccess:
-    """``scene`` and ``config`` of an environment that holds an :class:`EnvSetup`."""
+    """``scene``, ``config`` and ``info_level`` of an environment that holds an
+    :class:`EnvSetup`."""
 
     setup: EnvSetup
+
+    @property
+    def info_level(self) -> str:
+        """"lean" or "full" (module docstrings of the environments, Info)."""
+        return self._info_level
+
+    @info_level.setter
+    def info_level(self, level: Any) -> None:
+        # checked whenever set, after construction too, and passed on to the compiled step
+        self._info_level = check_info_level(level)
+        self.setup.set_info_level(self._info_level)
 
     @property
     def scene(self) -> Scene:

@@ -53,7 +53,9 @@ sub-environment and its random generator as they were.
 The single environment's keys as arrays of length ``num_envs`` with gymnasium's ``_key``
 masks; ``reward_terms`` is a dict of arrays.  With ``info_level="lean"`` (default) a step
 holds ``reward_terms`` (and ``failure``), plus every key, masked by the sub-environments whose
-episode ended in that step; ``info_level="full"`` gives every key at every step.  ``failure``
+episode ended in that step (the masked entries of ``balanced`` and
+``residual_imbalance_ratio`` are 0: at "lean" only the ending sub-environments measure
+them); ``info_level="full"`` gives every key at every step.  ``failure``
 (object array of messages) appears in steps where some sub-environment failed, masked by
 ``_failure``; the episode parameters (``imbalance``, ...) appear for the sub-environments
 reset in that step.
@@ -111,9 +113,10 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
-        self.info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
+        info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
         self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
                               overrides)
+        self.info_level = info_level
         self.num_envs = int(num_envs)
         check_flag(record_history, "record_history")
         n_trace = (self.num_envs if record_history
