@@ -154,3 +154,14 @@ def test_blocks_of_one_lane_tell_the_kernel_so(n_envs, one_lane):
     block = np.zeros((10, 8))
     assert lanes(block, setup.spec) == 8
     assert lanes(block, setup.spec | mdl.SPEC_ONE_LANE) == 1
+
+
+def test_the_compile_notice_names_the_effects_in_words():
+    from abb_gym.physics import model as mdl
+    from abb_gym.physics.specialise import Specialised
+    spec = mdl.SPEC_ROLL | mdl.SPEC_ONE_LANE
+    assert mdl.describe_spec(spec) == "36 (rolling resistance, one lane)"
+    assert mdl.describe_spec(0) == "0 (none)"
+    fn = Specialised(njit(lambda x, nb, spec: x), literal=(1, 2), names=("balls", mdl.EFFECTS))
+    assert fn._describe(1, 2) == "balls = 2"
+    assert fn._describe(2, spec) == "effects = 36 (rolling resistance, one lane)"

@@ -65,7 +65,7 @@ def _looped(noalias: bool) -> Specialised:
             t[0] += 1e-9  # a new time each call: nothing to hoist out of the loop
         return acc
 
-    return Specialised(many, literal=(7, 8), names=("balls", "effects"))
+    return Specialised(many, literal=(7, 8), names=("balls", mdl.EFFECTS))
 
 
 def rhs_cost(scene: str = "yoshida_odd", lanes=LANES, calls: int = 2_000_000,

@@ -441,9 +441,9 @@ def _step_parallel_packed(a, nb, spec):
                    a.bf, a.bg, a.bact, nb, spec)
 
 
-step_serial = Specialised(_step_serial_packed, literal=(1, 2), names=("balls", "effects"))
-step_parallel = Specialised(_step_parallel_packed, literal=(1, 2), names=("balls", "effects"),
-                            parallel=True)
+step_serial = Specialised(_step_serial_packed, literal=(1, 2), names=("balls", model.EFFECTS))
+step_parallel = Specialised(_step_parallel_packed, literal=(1, 2),
+                            names=("balls", model.EFFECTS), parallel=True)
 """``step_serial`` / ``step_parallel`` (blocks in parallel) ``(arrays, nb, spec)``, ``arrays``
 the :class:`StepArrays` of ``(order, act, s, p, b, d, st, cfg, obs, out, trace, active,
 *block_arrays)``: one environment step of every row (``order``: the rows in lane order,

@@ -472,7 +472,7 @@ def _run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, order, lanes, 
 
 
 _run_batch_specialised = Specialised(_run_batch, literal=(11, 12, 13),
-                                     names=("method", "balls", "effects"))
+                                     names=("method", "balls", mdl.EFFECTS))
 
 
 def run_inputs(scenes, drive, t_end: float, max_speed: float) -> tuple:

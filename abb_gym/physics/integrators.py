@@ -444,7 +444,7 @@ def _run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec):
     return STATUS_OK, t_out[-1], -1, count
 
 
-run = Specialised(_run, literal=(0, 11, 12), names=("method", "balls", "effects"))
+run = Specialised(_run, literal=(0, 11, 12), names=("method", "balls", mdl.EFFECTS))
 """``run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec)``:
 :func:`_run` compiled for this method, ball count ``nb`` and kernel specialisation ``spec``
 (each combination once, then cached), so that the equations carry exactly the scene's terms."""

@@ -564,6 +564,21 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
     return spec
 
 
+_SPEC_WORDS = ((SPEC_EXT, "extended effects"), (SPEC_ECC, "race eccentricity"),
+               (SPEC_ROLL, "rolling resistance"), (SPEC_MOTOR, "motor"),
+               (SPEC_ENVELOPE, "motor envelope"), (SPEC_ONE_LANE, "one lane"))
+
+
+def describe_spec(spec: int) -> str:
+    """The ``SPEC_*`` bits in words, for the compile notices: ``36 (rolling resistance, one
+    lane)``."""
+    words = [name for bit, name in _SPEC_WORDS if spec & bit]
+    return f"{spec} ({', '.join(words) or 'none'})"
+
+
+EFFECTS = ("effects", describe_spec)  # the name of a literal ``spec`` argument (Specialised)
+
+
 def make_work(n_balls: int, lanes: int = 1, dtype=np.float64) -> np.ndarray:
     """Scratch array for :func:`accelerations_block` (contact forces per ball and lane), in
     the precision ``dtype`` of the right-hand side."""

@@ -120,15 +120,17 @@ class Specialised:
 
     ``parallel``: ``dispatcher`` is a serial function that calls a ``parallel=True`` one;
     numba's threading layer is then started (:func:`start_parallel_runtime`) before any entry
-    point compiles or loads.
+    point compiles or loads.  ``names`` name the literal arguments in the compile notice; a
+    name may come with a function that puts the value in words, ``("effects", describe)``.
     """
 
-    def __init__(self, dispatcher, literal: Sequence[int], names: Sequence[str] = (),
+    def __init__(self, dispatcher, literal: Sequence[int], names: Sequence = (),
                  parallel: bool = False):
         self.dispatcher = dispatcher
         self.parallel = parallel
         self.literal = tuple(literal)
-        self.names = dict(zip(self.literal, names))
+        self.names = {i: name if isinstance(name, tuple) else (name, str)
+                      for i, name in zip(self.literal, names)}
         self._entries: dict[tuple, object] = {}
         self.__doc__ = dispatcher.__doc__
         self.__name__ = getattr(dispatcher, "__name__", "specialised")
@@ -154,7 +156,7 @@ class Specialised:
         if fn is None:
             sig = self._signature(args, generic)
             what = ("the general kernel" if generic else
-                    "a kernel for " + ", ".join(f"{self.names.get(i, f'argument {i}')} = {args[i]}"
+                    "a kernel for " + ", ".join(self._describe(i, args[i])
                                                 for i in self.literal))
             if self.parallel:
                 start_parallel_runtime()
@@ -162,6 +164,10 @@ class Specialised:
                 fn = self.dispatcher.compile(sig)
             self._entries[key] = fn
         return fn
+
+    def _describe(self, i: int, value) -> str:
+        name, words = self.names.get(i, (f"argument {i}", str))
+        return f"{name} = {words(int(value))}"
 
     def _signature(self, args, generic: bool) -> tuple:
         return tuple(typeof(a) if generic or i not in self.literal else types.literal(int(a))
