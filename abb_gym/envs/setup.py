@@ -33,8 +33,9 @@ from . import kernel
 from .kernel import N_G_ENV, observe_rows
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT,
                      C_INFO_FULL, C_KIND, C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OBS_TIME,
-                     C_OVERSPEED, C_SETTLE, C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG, C_SYNC_NOISE, C_TEP, C_TLIM,
-                     C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF, C_WOP, C_WR, C_WT, C_WV,
+                     C_OVERSPEED, C_SETTLE, C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG,
+                     C_SYNC_NOISE, C_TEP, C_TLIM, C_TREF, C_VIB_HI, C_VSCALE, C_WE, C_WF,
+                     C_WOP, C_WR, C_WT, C_WV,
                      FAIL_CLEARANCE, FAIL_NUMERICAL, FAIL_OVERSPEED, N_CFG, N_OUT, N_ST,
                      O_FINDEX, O_FTIME, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T, T_VIB,
                      T_VIBMAX, T_W, T_X, T_Y)
