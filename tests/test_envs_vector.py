@@ -314,6 +314,26 @@ def test_failure_info_is_masked_to_the_rows_that_failed():
     assert info["failure"][1] is None
 
 
+def test_reward_term_named_failure_is_masked_like_the_other_terms():
+    """The reward term ``failure`` (a float per row) shares its name with the failure
+    messages (None where a row did not fail), whose mask says which rows failed.  The term's
+    mask is the info's mask, like its siblings': after a partial reset it names the reset
+    rows only."""
+    env = gym.make_vec("abb_gym/RunUpSpeed-v0", num_envs=3,
+                       vectorization_mode="vector_entry_point", scene="yoshida_odd")
+    env.reset(seed=0)
+    env.step(np.full((3, 1), 0.5, dtype=np.float32))
+    reset_mask = np.array([False, True, False])
+    _, info = env.reset(options={"reset_mask": reset_mask})
+    terms = info["reward_terms"]
+    assert terms["failure"].dtype == np.float64
+    for name in ("vibration", "failure"):
+        assert terms["_" + name].tolist() == reset_mask.tolist(), name
+    _, _, _, _, info = env.step(np.full((3, 1), 0.5, dtype=np.float32))
+    assert info["reward_terms"]["_failure"].all() and "failure" not in info
+    env.close()
+
+
 def test_auto_on_a_few_lanes_takes_the_specialised_kernel_when_it_needs_no_compiling():
     """"auto" below VECTORISE_FROM lanes (the single env, small vector envs) runs the
     specialised kernel once it is compiled (here: by an env that asks for it; in the wheel:

@@ -133,8 +133,12 @@ def masked(info: dict[str, Any], mask: np.ndarray,
         if isinstance(value, dict):
             value = masked(value, mask)
         out[key] = value
-        if key == "failure":
-            # (elementwise in C: a list comprehension cost 90 us a step at 1024 rows)
+        if key == "failure" and getattr(value, "dtype", None) == object:
+            # the failure messages (None where a row did not fail), not the reward term of
+            # the same name, a float array masked like its siblings.  (Elementwise in C: a
+            # list comprehension cost 90 us a step at 1024 rows.  Applied to the float
+            # term, the comparison cost 65 us of the lean step's 110 us at 1024 rows, and
+            # marked every row valid after a partial reset.)
             out["_failure"] = np.not_equal(value, None)
         else:
             out["_" + key] = masks.get(key, mask).copy()
