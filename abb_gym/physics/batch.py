@@ -360,8 +360,10 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
             act[l] = 0
             if g[G_RUN, l] == 0:
                 continue
-            table = seg_d[g[G_ROW, l]]
             if g[G_LEFT, l] == 0:
+                # (the table view only here, at a piece's start: a view per lane and substep
+                # cost two atomic reference counts, on a count both threads share)
+                table = seg_d[g[G_ROW, l]]
                 if g[G_IX, l] >= 0:
                     # a piece is done: its end is the next piece's start
                     f[F_TP, l] = f[F_PE, l]
