@@ -1,4 +1,4 @@
-"""The perf map of compiled functions and the profile command (abb_gym.benchmarks.kernel_profile)."""
+"""The perf map of compiled functions and the profile command (benchmarks.kernel_profile)."""
 import shutil
 
 import numpy as np
