@@ -1,5 +1,6 @@
 """The perf map of compiled functions and the profile command (benchmarks.kernel_profile)."""
 import shutil
+import weakref
 
 import numpy as np
 import pytest
@@ -16,7 +17,17 @@ def test_readable_name_takes_the_python_name_out_of_numbas_symbol():
     assert kp.readable_name("_PyEval_EvalFrameDefault") == "_PyEval_EvalFrameDefault"
 
 
+class _Gone:
+    pass
+
+
 def test_perf_map_names_a_function_compiled_in_this_process(tmp_path):
+    """Also with a dead weak proxy among the collector's objects (asking one for its class
+    raises ReferenceError; a test run with torch loaded holds some)."""
+    gone = _Gone()
+    dead_proxy = [weakref.proxy(gone)]
+    del gone
+
     @njit(cache=False)
     def profiled_square_sum(a):
         total = 0.0
@@ -35,6 +46,7 @@ def test_perf_map_names_a_function_compiled_in_this_process(tmp_path):
     assert mine, "the freshly compiled function is not in the map"
     start, size = mine[0]
     assert start > 0 and 0 < size <= 1 << 22
+    assert len(dead_proxy) == 1  # (kept alive through the map's walk)
 
 
 @pytest.mark.parametrize("kwargs, field", [({"envs": 0}, "envs"), ({"seconds": 0.1}, "seconds"),

@@ -55,7 +55,9 @@ def _compiled_symbols() -> dict[int, str]:
     from numba.core.dispatcher import Dispatcher
     symbols: dict[int, str] = {}
     for obj in gc.get_objects():
-        if not isinstance(obj, Dispatcher):
+        # type(), not isinstance(): isinstance asks a weak proxy for its class, and a dead
+        # proxy (the garbage collector lists them) raises ReferenceError
+        if not issubclass(type(obj), Dispatcher):
             continue
         for cres in list(obj.overloads.values()):
             library = getattr(cres, "library", None)
