@@ -18,20 +18,8 @@ share of all samples (both threads) by library and by function.  Compiled functi
 compiler inlined into their callers count as their callers.
 
 Needs ``perf`` on the PATH and permission to attach (``kernel.perf_event_paranoid`` <= 2
-for a child process of one's own).  On this 2-core machine, 2026-11-24, 1024
-sub-environments, share of all samples (both threads):
-
-==================================================  ========  ========
-                                                    float64   float32
-==================================================  ========  ========
-right-hand side (``accelerations_block``)            52.5 %    41.9 %
-the step's row bookkeeping (``_block_step``,          20.6 %    31.3 %
-``_begin``, ``_interval_end``, ``_finish``,
-``_observe``, ``runup.update``)
-``advance_block`` (schedule, whirl sums)              8.1 %     9.5 %
-RK4 stage arithmetic (``_rk4_step``)                  7.0 %     5.6 %
-Python, numpy, libc (one thread)                      8.0 %     9.5 %
-==================================================  ========  ========
+for a child process of one's own).  A profile of 2026-11-24 at 1024 sub-environments, both
+precisions: README, "Integrators: speed against accuracy".
 """
 from __future__ import annotations
 
@@ -44,6 +32,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from ..physics.methods import PRECISIONS
 
 __all__ = ["write_perf_map", "readable_name", "profile", "main"]
 
@@ -124,7 +114,7 @@ env = gym.make_vec("abb_gym/RunUpSpeed-v0", num_envs=n, vectorization_mode="vect
 env.reset(seed=0)
 actions = np.random.default_rng(0).uniform(0.2, 1.0, (300, n, 1)).astype(np.float32)
 for k in range(120):  # past an episode's end: the reset path compiles too
-    env.step(actions[k % 300])
+    env.step(actions[k])
 path, count = write_perf_map()
 print("{READY}", path, count, flush=True)
 start = time.perf_counter()
@@ -157,8 +147,8 @@ def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
         raise ValueError(f"envs must be in [1, 65536] (got {envs})")
     if not 0.5 <= seconds <= 600:
         raise ValueError(f"seconds must be in [0.5, 600] (got {seconds})")
-    if precision not in ("float64", "float32"):
-        raise ValueError(f"precision must be 'float64' or 'float32' (got {precision!r})")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS} (got {precision!r})")
     if shutil.which("perf") is None:
         raise RuntimeError("kernel_profile needs Linux perf on the PATH (package linux-perf "
                            "or linux-tools)")
@@ -184,9 +174,9 @@ def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
     finally:
         if child.poll() is None:
             child.kill()
+        shutil.rmtree(work / "numba_cache", ignore_errors=True)
     libraries = _report(data, "dso")
     functions = [(pct, readable_name(name)) for pct, name in _report(data, "sym")][:top]
-    shutil.rmtree(work / "numba_cache", ignore_errors=True)
     return {"libraries": libraries[:8], "functions": functions, "rate": rate,
             "data": str(data)}
 
@@ -194,7 +184,7 @@ def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--envs", type=int, default=1024, help="sub-environments (default 1024)")
-    ap.add_argument("--precision", choices=("float64", "float32"), default="float64")
+    ap.add_argument("--precision", choices=PRECISIONS, default="float64")
     ap.add_argument("--seconds", type=float, default=8.0, help="profiled time [s]")
     ap.add_argument("--top", type=int, default=15, help="functions to list")
     args = ap.parse_args(argv)
