@@ -107,3 +107,36 @@ def test_advance_block_reports_nonfinite_and_whirl():
                         integ.METHOD_RK4, 2, spec)
     assert list(g[batch.G_STATUS]) == [integ.STATUS_NONFINITE, 0]
     assert g[batch.G_BAD, 0] >= 0 and abs(f[batch.F_TFAIL, 0] - 2.6 - 1e-3) < 1e-12
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_run_batch_does_not_depend_on_the_block_size(precision):
+    """A run's states are the same bits in blocks of ``batch.MAX_LANES`` lanes (the default
+    here), half that and 8 lanes: the lane count per block is a speed setting, not part of the
+    arithmetic.  300 runs
+    with their own ball drag and start (so their steps differ and the last block is part
+    full), in the order of the step size and in a shuffled order."""
+    base = abb_gym.load_scene("yoshida_odd")
+    rng = np.random.default_rng(3)
+    scales = rng.uniform(0.5, 2.0, 300)
+    scenes = [base.replace(ball_drag=[k * v for v in base.ball_drag],
+                           ball_angles0=list(rng.uniform(-3.0, 3.0, base.ball_count)))
+              for k in scales]
+    drive = abb_gym.SpeedProfile.ramp(base.drive_max_acceleration, base.drive_operating_speed)
+    t_out = np.linspace(0.0, 1.5, 7)
+    s0, seg_d, nseg, p, b, h = batch.run_inputs(scenes, drive, t_out[-1],
+                                                base.drive_operating_speed)
+    assert np.unique(h).size > 10  # the runs take different steps
+    full = batch.MAX_LANES
+    assert batch.lanes_per_block(len(scenes)) == full
+    results = []
+    for lanes, order in [(full, None), (full // 2, None), (8, None),
+                         (full, rng.permutation(300))]:
+        out = np.empty((len(scenes), len(t_out), s0.shape[1]))
+        status = np.zeros((len(scenes), 4))
+        batch.run_batch(s0, t_out, seg_d, nseg, p, b, h, out, status, order=order,
+                        lanes=lanes, kernel="specialised", precision=precision)
+        assert np.all(status[:, 0] == 0) and np.all(np.isfinite(out))
+        results.append(out)
+    for out in results[1:]:
+        assert np.array_equal(out, results[0])

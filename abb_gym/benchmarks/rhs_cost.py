@@ -30,7 +30,7 @@ from ..physics.specialise import Specialised
 
 __all__ = ["rhs_cost", "LANES"]
 
-LANES = (1, 16, 32, 64, 256, 1024)
+LANES = (1, 16, 32, 64, 128, 256, 1024)
 
 
 def _inputs(scene, n_lanes: int, spec: int) -> list:

@@ -3,7 +3,7 @@
 Every environment (single or vector, any action type) keeps its state in preallocated arrays
 with one row per environment (layouts: :mod:`abb_gym.envs.layout`) and advances them with
 **one** compiled call per step, :func:`step`.  The environments are taken in blocks of lanes
-(:class:`abb_gym.physics.batch.Blocks`; one lane for a single environment, up to 64 for a
+(:class:`abb_gym.physics.batch.Blocks`; one lane for a single environment, up to 128 for a
 vector environment, blocks in parallel with ``numba.prange``).  For each block:
 
 1. each lane's row turns its action into a drive row (:mod:`abb_gym.envs.actions`) or keeps

@@ -3,7 +3,7 @@
 ``gym.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` returns one of
 these.  All sub-environments share the scene, the preset and the action type; each has its
 own episode parameters, random generator and state.  One ``step`` runs
-the compiled step of :mod:`abb_gym.envs.kernel` over blocks of up to 64 sub-environments
+the compiled step of :mod:`abb_gym.envs.kernel` over blocks of up to 128 sub-environments
 (``numba.prange`` over blocks, one thread pool launch per step), with the same per-row
 arithmetic as the single environment, so sub-environment ``i`` and a single environment reset
 with the same seed follow the same trajectory bit for bit.

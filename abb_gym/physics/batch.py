@@ -1,7 +1,7 @@
 """Batched fixed-step integration: many independent balancers in blocks of lanes.
 
 The environments, parameter sweeps and batch simulations advance many copies of the model at
-once.  They do it in *blocks*: up to 64 environments side by side as the lanes of
+once.  They do it in *blocks*: up to 128 environments side by side as the lanes of
 structure-of-arrays blocks (every array carries the lane last), so that the compiled
 right-hand side (:func:`abb_gym.physics.model.accelerations_block`) works on all lanes of a
 block with vector instructions.  A single environment or a single simulation is a block of one
@@ -106,7 +106,14 @@ N_F = 22
 # index in the piece, status, first non-finite state entry, steps taken, environment row
 (G_ON, G_RUN, G_J, G_NSEG, G_LEFT, G_IX, G_STATUS, G_BAD, G_STEPS, G_ROW) = range(10)
 N_G = 10
-MAX_LANES = 64
+#: lanes per block at most.  A right-hand side call has a fixed cost (the vector loop's set-up
+#: and its constants), which a block of 128 lanes spreads over twice the lanes of one of 64:
+#: per lane 21 against 27 ns in float64, 10 against 15 ns in float32 on ``yoshida_odd``
+#: (``python -m abb_gym.benchmarks.rhs_cost``).  In the vector environment at 1024
+#: sub-environments 256 lanes per block gained nothing over 128 (alternating whole-process
+#: runs; the README's "Vector environments" gives the figures).  A row's arithmetic does not
+#: depend on its block's size (``tests/test_envs_batch.py``).
+MAX_LANES = 128
 TWO_PI = 2.0 * math.pi
 
 
@@ -124,8 +131,9 @@ def work_rows(n_balls: int, dtype) -> int:
 
 
 def lanes_per_block(n_envs: int, cores: int = 2) -> int:
-    """Lanes per block for ``n_envs`` environments: a power of two up to 64, small enough
-    that there are at least ``cores`` blocks to run in parallel (1 for a single environment)."""
+    """Lanes per block for ``n_envs`` environments: a power of two up to :data:`MAX_LANES`,
+    small enough that there are at least ``cores`` blocks to run in parallel (1 for a single
+    environment)."""
     lanes = 1
     while lanes * 2 <= MAX_LANES and lanes * 2 * cores <= n_envs:
         lanes *= 2
