@@ -1,5 +1,9 @@
 """Shared test options: ``--runslow`` opts in to long runs marked ``@pytest.mark.slow``.
 
+Tests that call SB3's ``learn`` with its default logger (curricula, the everyday script) get
+``SB3_LOGDIR`` pointed at the session's temporary folder, so the suite leaves no
+``SB3-<time>`` folders in the system's temporary directory (it left 14 per run).
+
 Property-based tests (hypothesis) are deterministic by default: the same examples on every
 run, so the suite never flakes on an example no earlier run drew.  ``ABB_GYM_FUZZ_SCALE=N``
 (N > 1) hunts instead: N times the examples, new random ones each run (``make fuzz``).
@@ -36,6 +40,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip_slow)
         if "wheel" in item.keywords and not config.getoption("--runwheel"):
             item.add_marker(skip_wheel)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def sb3_log_folder(tmp_path_factory):
+    """SB3's default logger folder, inside this session's temporary folder (module docstring;
+    subprocesses inherit it)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3_logs")))
+        yield
 
 
 @pytest.fixture
