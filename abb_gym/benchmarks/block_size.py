@@ -4,7 +4,8 @@
                                             [--lanes 64 128 ...] [--rounds R]
 
 One vector environment per block size (:data:`abb_gym.physics.batch.MAX_LANES` set while
-each is built, and checked in the built environment) of the ``bench speed`` kind
+each is built; the block size each got is reported, since few sub-environments cap it) of
+the ``bench speed`` kind
 (``RunUpSpeed-v0`` on ``yoshida_odd``, 100-step episodes, so resets are included), all in
 one process and stepped in alternating bursts of :data:`BURST` steps.  The machine's speed
 drifts by 10-25 % within minutes; bursts a fraction of a second apart see the same machine,
@@ -64,14 +65,23 @@ def block_size_rates(num_envs: int = 1024, lanes: Sequence[int] = (64, 128),
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 2:
         raise ValueError(f"rounds must be an integer >= 2 (got {rounds!r})")
     envs = []
-    for size in sizes:
-        with _max_lanes(size):
-            env = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                               scene=SCENE, preset=preset, control_interval=0.01,
-                               precision=precision, kernel="specialised",
-                               max_episode_steps=EPISODE_STEPS)
-        env.reset(seed=0)
-        envs.append(env)
+    try:
+        for size in sizes:
+            with _max_lanes(size):
+                envs.append(gym.make_vec(
+                    ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                    scene=SCENE, preset=preset, control_interval=0.01, precision=precision,
+                    kernel="specialised", max_episode_steps=EPISODE_STEPS))
+            envs[-1].reset(seed=0)
+        return _race(envs, sizes, num_envs, rounds, progress)
+    finally:
+        for env in envs:
+            env.close()
+
+
+def _race(envs: list, sizes: list[int], num_envs: int, rounds: int, progress: bool
+          ) -> list[dict]:
+    """The timed bursts of :func:`block_size_rates` and its rows."""
     actions = np.random.default_rng(0).uniform(
         0.2, 1.0, size=(BURST, num_envs, 1)).astype(np.float32)
     for env in envs:  # compile (or load) and warm up
@@ -94,7 +104,6 @@ def block_size_rates(num_envs: int = 1024, lanes: Sequence[int] = (64, 128),
             ratio = times[:, 0] / times[:, i]
             row["ratio"] = tuple(float(v) for v in np.percentile(ratio, [50, 25, 75]))
         rows.append(row)
-        env.close()
     return rows
 
 
