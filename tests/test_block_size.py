@@ -29,10 +29,10 @@ def test_the_global_comes_back_after_a_failure(monkeypatch):
 
     def broken(*args, **kwargs):
         assert batch.MAX_LANES == 4
-        raise RuntimeError("make_vec failed")
+        raise RuntimeError("make_vector failed")
 
-    monkeypatch.setattr(bs.gym, "make_vec", broken)
-    with pytest.raises(RuntimeError, match="make_vec failed"):
+    monkeypatch.setattr(bs, "make_vector", broken)
+    with pytest.raises(RuntimeError, match="make_vector failed"):
         bs.block_size_rates(num_envs=32, lanes=(4, 8), rounds=2)
     assert batch.MAX_LANES == before
 

@@ -23,13 +23,12 @@ import time
 from contextlib import contextmanager
 from typing import Iterator, Sequence
 
-import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
 from ..physics import batch
 from ..physics.methods import PRECISIONS
-from .env_speed import ENV_ID, EPISODE_STEPS, SCENE
+from .env_speed import make_vector
 
 __all__ = ["block_size_rates", "BURST"]
 
@@ -68,10 +67,8 @@ def block_size_rates(num_envs: int = 1024, lanes: Sequence[int] = (64, 128),
     try:
         for size in sizes:
             with _max_lanes(size):
-                envs.append(gym.make_vec(
-                    ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                    scene=SCENE, preset=preset, control_interval=0.01, precision=precision,
-                    kernel="specialised", max_episode_steps=EPISODE_STEPS))
+                envs.append(make_vector(num_envs, "specialised", precision=precision,
+                                        preset=preset))
             envs[-1].reset(seed=0)
         return _race(envs, sizes, num_envs, rounds, progress)
     finally:

@@ -36,11 +36,14 @@ __all__ = ["measure", "vector_rate", "batch_rate", "single_rate", "cartpole_rate
            "cold_start"]
 
 
-def _make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4",
-                 precision: str = "float64"):
+def make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4",
+                precision: str = "float64", preset: str = "train"):
+    """The vector environment every speed benchmark steps (``bench speed``'s rows,
+    :mod:`~abb_gym.benchmarks.block_size`, :mod:`~abb_gym.benchmarks.kernel_profile`)."""
     return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        scene=SCENE, control_interval=0.01, integrator=integrator,
-                        precision=precision, kernel=kernel, max_episode_steps=EPISODE_STEPS)
+                        scene=SCENE, preset=preset, control_interval=0.01,
+                        integrator=integrator, precision=precision, kernel=kernel,
+                        max_episode_steps=EPISODE_STEPS)
 
 
 #: below this ratio of specialised to general vector-env speed the specialised kernel is not
@@ -65,7 +68,7 @@ def vector_rate(num_envs: int, n_steps: int, kernel: str | None = None,
                 integrator: str = "rk4", repeats: int = 1, precision: str = "float64") -> dict:
     """Env-steps per second of the native vector env (resets included) and the cost of one
     sub-environment's reset [us] (best of ``repeats``), in the step's ``precision``."""
-    env = _make_vector(num_envs, kernel, integrator, precision)
+    env = make_vector(num_envs, kernel, integrator, precision)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = rng.uniform(0.2, 1.0, size=(n_steps, num_envs, 1)).astype(np.float32)
@@ -187,7 +190,7 @@ def cold_start(with_empty_cache: bool = True) -> dict:
 def _vector_memory(num_envs: int) -> float:
     """Peak memory [MB] traced while building, resetting and stepping the vector env."""
     tracemalloc.start()
-    env = _make_vector(num_envs, None)
+    env = make_vector(num_envs, None)
     env.reset(seed=0)
     actions = np.full((num_envs, 1), 0.6, dtype=np.float32)
     for _ in range(5):

@@ -104,13 +104,11 @@ def readable_name(symbol: str) -> str:
 
 _CHILD = f"""
 import sys, time
-import numpy as np, gymnasium as gym
-import abb_gym
+import numpy as np
+from abb_gym.benchmarks.env_speed import make_vector
 from abb_gym.benchmarks.kernel_profile import write_perf_map
 n, precision, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
-env = gym.make_vec("abb_gym/RunUpSpeed-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                   scene="yoshida_odd", control_interval=0.01, max_episode_steps=100,
-                   precision=precision, kernel="specialised")
+env = make_vector(n, "specialised", precision=precision)
 env.reset(seed=0)
 actions = np.random.default_rng(0).uniform(0.2, 1.0, (300, n, 1)).astype(np.float32)
 for k in range(120):  # past an episode's end: the reset path compiles too
