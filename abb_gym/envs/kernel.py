@@ -314,10 +314,11 @@ G_DONE = batch.N_G + 2      # the row's episode ended in this step
 N_G_ENV = batch.N_G + 3
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", refcounts=False)
 def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
                 bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
-    """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``)."""
+    """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``).
+    Compiled without reference counts (:mod:`abb_gym._numba`)."""
     n_env = order.shape[0]
     ns = s.shape[1]
     sb = bs[q]

@@ -322,7 +322,7 @@ def _book_step(s, f, g, act, h, tc, L):
         f[W_MAX, l] = r if on and r > w_max else w_max
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", refcounts=False)
 def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method, nb, spec):
     """Advance every lane ``l`` of one block with ``g[G_ON, l]`` set from ``f[F_T0, l]`` to
     ``f[F_T1, l]`` with steps of at most ``f[F_HMAX, l]``, by ``method``
@@ -335,7 +335,8 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
     state, at time ``f[F_TFAIL]``, first bad entry ``g[G_BAD]``), ``g[G_STEPS]``, and over the
     substeps (right-endpoint rule) ``f[W_INT]`` the time integral of the deflection from the
     rest position, ``f[W_DMAX]`` its maximum, ``f[W_MAX]`` the largest whirl radius
-    ``sqrt(x^2 + y^2)`` from the bearing axis.
+    ``sqrt(x^2 + y^2)`` from the bearing axis.  Compiled without reference counts
+    (:mod:`abb_gym._numba`).
     """
     L = mdl.lanes_of(s, spec)
     nq = 3 + nb

@@ -81,13 +81,13 @@ def _first_nonfinite(s):
     return -1
 
 
-@njit(cache=True, error_model="numpy", noalias=True)
+@njit(cache=True, error_model="numpy", noalias=True, refcounts=False)
 def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
     """One classical RK4 step of every lane of a block (arrays lane-last, see
     :func:`abb_gym.physics.model.accelerations_block`): lane ``l`` from ``t[l]`` by ``h[l]``;
     lanes with ``active[l] == 0`` are computed but keep their state (a masked update, so that
     the lane loops stay branch-free).  No two array arguments may overlap (compiled
-    ``noalias``: :mod:`abb_gym._numba`)."""
+    ``noalias``: :mod:`abb_gym._numba`); compiled without reference counts (same module)."""
     n = s.shape[0]
     L = mdl.lanes_of(s, spec)
     k1, k2, k3, k4 = k[0], k[1], k[2], k[3]
@@ -204,14 +204,15 @@ def etd_coefficients(z):
             (2.0 + z + e * (z - 2.0)) / z3, (-4.0 - 3.0 * z - z * z + e * (4.0 - z)) / z3)
 
 
-@njit(cache=True, error_model="numpy", noalias=True)
+@njit(cache=True, error_model="numpy", noalias=True, refcounts=False)
 def _etdrk4_step(t, h, s, p, b, d, k, tmp, tt, work, lam, coef, active, nb, spec):
     """Cox-Matthews ETDRK4 for y' = -lam y + N(t, y), N = f + lam y, lam frozen per step, for
     every lane of a block (masked like :func:`_rk4_step`).
 
     Exact for the drag relaxation under constant forcing (the quasi-steady balance of drag and
     driving force that a Lawson integrating factor gets badly wrong), fourth order like RK4.
-    No two array arguments may overlap (compiled ``noalias``: :mod:`abb_gym._numba`).
+    No two array arguments may overlap (compiled ``noalias``: :mod:`abb_gym._numba`);
+    compiled without reference counts (same module).
     """
     n = s.shape[0]
     L = mdl.lanes_of(s, spec)
