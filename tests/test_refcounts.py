@@ -5,7 +5,12 @@ environment frees its buffers.
 
 A function called from an uncounted kernel that returned a counted view would leak one
 reference per call (numba refuses the other direction at compile time); these tests would
-then see the count grow or the buffers survive their environment.
+then see the count grow or the buffers survive their environment: a leak planted in
+``advance_block`` failed every test below but the first.
+
+The vector environment's parallel step is not among the cases: numba hands the arrays to
+the body of a parallel loop without their reference counts (the planted leak left it
+unchanged), so there is nothing to check there that the serial step does not check.
 """
 from __future__ import annotations
 
@@ -52,8 +57,7 @@ def _step_through_episodes(env, n_steps: int, n_envs: int | None = None) -> None
 CASES = {
     "single rk4": dict(vector=None, integrator="rk4"),
     "single etdrk4": dict(vector=None, integrator="etdrk4"),
-    "vector serial": dict(vector=1, integrator="rk4"),   # one block: the serial step
-    "vector parallel": dict(vector=6, integrator="rk4"),  # blocks in parallel
+    "vector serial": dict(vector=1, integrator="rk4"),  # one block: the serial step
 }
 
 
@@ -71,8 +75,6 @@ def test_stepping_keeps_counts_and_close_frees_the_buffers(case):
     env.reset(seed=3)
     _step_through_episodes(env, 3, n_envs)  # loads the kernel
     arrays = _buffer_arrays(env)
-    if n_envs is not None and n_envs > 1:
-        assert env.unwrapped._bufs.blocks.s.shape[0] > 1, "meant to run several blocks"
     counts = [sys.getrefcount(a) for a in arrays]
     _step_through_episodes(env, 60, n_envs)
     assert [sys.getrefcount(a) for a in arrays] == counts
