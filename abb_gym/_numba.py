@@ -20,17 +20,18 @@ same results, the old speed.
 **Kernels without reference counts.**  ``njit(refcounts=False)`` compiles a function without
 numba's reference counting (its target option ``_nrt``).  Counted, a function that calls
 others takes a reference on each array argument at its entry and drops it at its exits, and
-on each view it makes (``k[0]``): an atomic operation each.  ``_rk4_step`` did 14 pairs per
-RK4 step, on counts that both threads of the vector environment share; uncounted, the single
-environment's compiled step went from 8.4 to 5.3 us (10 RK4 steps) and the vector
-environment gained 15-30 % (README, "Kernels without reference counts").  Such a function may
-not allocate (numba then refuses to compile it), and the functions it calls inherit the
-setting where they set none.  The rule that keeps this safe: **no function called, not
-inlined, from an uncounted function may return an array** (or anything else numba counts):
-compiled uncounted it would hand a counted caller a reference it never took, compiled counted
-it would hand the uncounted one a reference it never drops.  Array arguments are safe either
-way, since a callee takes and drops its own references.  ``tests/test_refcounts.py`` checks
-that stepping leaves every buffer's count as it was and that nothing stays alive.
+on each view it makes (``k[0]``): an atomic operation in a call the compiler cannot see into,
+so the code around it reloads what the call might have changed.  ``_rk4_step`` made 14 such
+pairs per RK4 step.  Uncounted, the single environment's compiled step went from 5.9 to
+5.3 us (10 RK4 steps) and the vector environment gained 15-30 % (README, "Kernels without
+reference counts").  Such a function may not allocate (numba refuses to compile it), and
+the functions it calls inherit the setting where they set none.  The rule that keeps this
+safe: **no function called, not inlined, from an uncounted function may return an array**
+(or anything else numba counts).  Compiled counted, it would hand the uncounted caller a
+reference that is never dropped (a leak); compiled uncounted, numba refuses to return a new
+view.  Array arguments are safe either way, since a callee takes and drops its own
+references.  ``tests/test_refcounts.py`` checks that stepping leaves every buffer's count
+as it was and that closing an environment frees its buffers.
 """
 from ._jit_cache import flush_if_sources_changed, install_locator
 
