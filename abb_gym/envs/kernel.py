@@ -54,7 +54,7 @@ def _clip(v, lo, hi):
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _observe(i, s, p, b, st, cfg, obs, out, trace, balance):
     """Write the observation row ``obs[i]``, the whirl radius outputs, the trace, and with
     ``balance`` the balance outputs (for an info that shows them: EnvSetup.set_info_level)."""
@@ -117,7 +117,7 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace, balance):
                 row[T_BALLS + kb] = s[i, 3 + kb]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interval_begin(i, st, cfg, f, g, lane):
     """Set lane ``lane``'s interval, step limit, drive table position and whirl rest position
     for row ``i``'s next control interval."""
@@ -138,7 +138,7 @@ def _interval_begin(i, st, cfg, f, g, lane):
         f[batch.W_ZY, lane] = st[i, S_ZY]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interval_end(i, s, d, st, cfg, out, f, g, lane):
     """Book row ``i``'s control interval just advanced in lane ``lane`` (its state already
     copied back to ``s[i]`` unless it failed, in which case ``s[i]`` still holds the state at
@@ -244,27 +244,31 @@ def _interval_end(i, s, d, st, cfg, out, f, g, lane):
     return term or trunc
 
 
-@njit(cache=True)
-def _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
+# what _begin found for a row
+ROW_IDLE = 0      # inactive, or a non-finite action: the row's outputs are complete
+ROW_STEPS = 1     # the row integrates this step
+ROW_FINISHED = 2  # its episode had ended: nothing moves, the row is only observed
+
+
+@njit(cache=True, inline="always")
+def _begin(i, act, s, d, st, cfg, out, active):
     """The start of row ``i``'s step: check and clip the action, write the interval's drive
-    row.  Returns True if the row goes on to integrate (False: inactive, already finished,
-    or a non-finite action; the row's outputs are then complete)."""
+    row.  Returns ``ROW_STEPS``, ``ROW_FINISHED`` or ``ROW_IDLE``."""
     for c in range(out.shape[1]):
         out[i, c] = 0.0
     if active[i] == 0:
-        return False
+        return ROW_IDLE
     if st[i, S_DONE] != 0.0:
         # stepping a finished episode: nothing moves, no reward (the caller warns)
         out[i, O_TERM] = st[i, S_TERM]
         out[i, O_TRUNC] = st[i, S_TRUNC]
-        _observe(i, s, p, b, st, cfg, obs, out, trace, True)
-        return False
+        return ROW_FINISHED
     na = int(cfg[C_NACT])
     for a in range(na):
         if not math.isfinite(act[i, a]):
             out[i, O_ACTFLAG] = ACT_NONFINITE
             out[i, O_FINDEX] = a
-            return False
+            return ROW_IDLE
     flag = ACT_OK
     for a in range(na):
         v = act[i, a]
@@ -285,12 +289,13 @@ def _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
         st[i, S_NSEG] = 1.0
         st[i, S_J] = 0.0
     # (a whole-episode action's rows were written from the action on the Python side)
-    return True
+    return ROW_STEPS
 
 
-@njit(cache=True)
-def _finish(i, done, s, p, b, st, cfg, obs, out, trace):
-    """The end of row ``i``'s step: time limit, reward sum, episode flags, observation."""
+@njit(cache=True, inline="always")
+def _finish(i, done, st, cfg, out):
+    """The end of row ``i``'s step: time limit, reward sum, episode flags.  Returns whether
+    its observation measures the balance (the episode ended, or the info shows it always)."""
     kind = int(cfg[C_KIND])
     if cfg[C_BACKSTOP] > 0.0:
         # the rule of gymnasium's TimeLimit: truncated once elapsed steps >= the limit
@@ -304,11 +309,19 @@ def _finish(i, done, s, p, b, st, cfg, obs, out, trace):
         st[i, S_DONE] = 1.0
         st[i, S_TERM] = out[i, O_TERM]
         st[i, S_TRUNC] = out[i, O_TRUNC]
-    _observe(i, s, p, b, st, cfg, obs, out, trace, done or cfg[C_INFO_FULL] != 0.0)
+    return done or cfg[C_INFO_FULL] != 0.0
+
+
+@njit(cache=True)
+def _record_trace(i, s, p, b, st, cfg, obs, out, trace):
+    """Row ``i``'s observation and trace between the intervals of a whole-episode action (the
+    render trace).  A function of its own, so that the block step inlines the observation
+    once."""
+    _observe(i, s, p, b, st, cfg, obs, out, trace, False)
 
 
 # rows of the block's integer array that the environment step uses (beyond batch.N_G)
-G_STEPPING = batch.N_G      # the row started a step that integrates
+G_STEPPING = batch.N_G      # what _begin found (ROW_*)
 G_INTEGRATE = batch.N_G + 1  # the row takes part in the next interval
 G_DONE = batch.N_G + 2      # the row's episode ended in this step
 N_G_ENV = batch.N_G + 3
@@ -338,8 +351,9 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
             continue
         i = order[r]
         g[batch.G_ROW, l] = i
-        if _begin(i, act, s, p, b, d, st, cfg, obs, out, trace, active):
-            g[G_STEPPING, l] = 1
+        found = _begin(i, act, s, d, st, cfg, out, active)
+        g[G_STEPPING, l] = found
+        if found == ROW_STEPS:
             g[G_INTEGRATE, l] = 1
             batch.load_lane(s, p, b, i, sb, pb, bbq, f, l)
     while True:
@@ -366,10 +380,16 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 g[G_INTEGRATE, l] = 0
                 g[G_DONE, l] = 1 if done else 0
             else:
-                _observe(i, s, p, b, st, cfg, obs, out, trace, False)  # the render trace
+                _record_trace(i, s, p, b, st, cfg, obs, out, trace)
     for l in range(lanes):
-        if g[G_STEPPING, l] != 0:
-            _finish(g[batch.G_ROW, l], g[G_DONE, l] != 0, s, p, b, st, cfg, obs, out, trace)
+        found = g[G_STEPPING, l]
+        if found == ROW_IDLE:
+            continue
+        i = g[batch.G_ROW, l]
+        balance = True
+        if found == ROW_STEPS:
+            balance = _finish(i, g[G_DONE, l] != 0, st, cfg, out)
+        _observe(i, s, p, b, st, cfg, obs, out, trace, balance)
 
 
 @njit(cache=True, error_model="numpy")
