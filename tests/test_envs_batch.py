@@ -140,3 +140,31 @@ def test_run_batch_does_not_depend_on_the_block_size(precision):
         results.append(out)
     for out in results[1:]:
         assert np.array_equal(out, results[0])
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_block_arrays_start_apart_modulo_4096(precision):
+    # rows of whole kilobytes and arrays at one address modulo 4096 made the right-hand
+    # side's loads wait on its stores (4K aliasing: batch.staggered_zeros)
+    blocks = batch.Blocks(1024, 2, precision=precision)
+    arrays = blocks.arrays()
+    starts = [a.ctypes.data % 4096 for a in arrays]
+    for i in range(len(starts)):
+        for j in range(i + 1, len(starts)):
+            gap = (starts[i] - starts[j]) % 4096
+            assert 64 <= gap <= 4096 - 64, (i, j, starts)
+    dtype = np.dtype(precision)
+    assert [a.dtype for a in arrays[:9]] == [dtype] * 9
+    assert (arrays[9].dtype, arrays[10].dtype, arrays[11].dtype) == (np.float64, np.int64,
+                                                                     np.uint8)
+    assert all(a.flags.c_contiguous and a.shape[0] == 1024 // blocks.lanes and not a.any()
+               for a in arrays)
+    assert blocks.s.shape == (1024 // blocks.lanes, 10, blocks.lanes)
+
+
+def test_staggered_zeros_places_the_start_and_keeps_the_shape():
+    for slot in range(12):
+        a = batch.staggered_zeros((3, 5, 7), np.float32, slot)
+        assert a.shape == (3, 5, 7) and a.dtype == np.float32 and a.flags.c_contiguous
+        assert a.ctypes.data % 4096 == (slot * batch.STAGGER) % 4096
+        assert not a.any()
