@@ -185,18 +185,23 @@ class Blocks:
         ns = 2 * (3 + n_balls)
         dtype = precision_dtype(precision)
         self.lanes = lanes
-        # each array in its own place modulo 4096 (staggered_zeros), in the order of arrays()
-        shapes = (((nblk, ns, lanes), dtype), ((nblk, mdl.N_PARAMS, lanes), dtype),
-                  ((nblk, n_balls, mdl.N_BALL_PARAMS, lanes), dtype),
-                  ((nblk, dl.N_DRIVE, lanes), dtype), ((nblk, 7, ns, lanes), dtype),
-                  ((nblk, ns, lanes), dtype), ((nblk, ns, lanes), dtype),
-                  ((nblk, 6, ns, lanes), dtype),
-                  ((nblk, work_rows(n_balls, dtype), mdl.WORK_COLUMNS, lanes), dtype),
-                  ((nblk, N_F, lanes), np.float64),
-                  ((nblk, max(N_G, int_rows), lanes), np.int64), ((nblk, lanes), np.uint8))
-        (self.s, self.p, self.b, self.d, self.k, self.tmp, self.lam, self.coef, self.work,
-         self.f, self.g, self.act) = (staggered_zeros(shape, dt, slot)
-                                      for slot, (shape, dt) in enumerate(shapes))
+        slots = iter(range(12))  # each array in its own place modulo 4096 (staggered_zeros)
+
+        def zeros(shape, dt=dtype):
+            return staggered_zeros(shape, dt, next(slots))
+
+        self.s = zeros((nblk, ns, lanes))
+        self.p = zeros((nblk, mdl.N_PARAMS, lanes))
+        self.b = zeros((nblk, n_balls, mdl.N_BALL_PARAMS, lanes))
+        self.d = zeros((nblk, dl.N_DRIVE, lanes))
+        self.k = zeros((nblk, 7, ns, lanes))
+        self.tmp = zeros((nblk, ns, lanes))
+        self.lam = zeros((nblk, ns, lanes))
+        self.coef = zeros((nblk, 6, ns, lanes))
+        self.work = zeros((nblk, work_rows(n_balls, dtype), mdl.WORK_COLUMNS, lanes))
+        self.f = zeros((nblk, N_F, lanes), np.float64)
+        self.g = zeros((nblk, max(N_G, int_rows), lanes), np.int64)
+        self.act = zeros((nblk, lanes), np.uint8)
 
     def arrays(self) -> tuple:
         """``(s, p, b, d, k, tmp, lam, coef, work, f, g, act)``, each with the block axis first."""
