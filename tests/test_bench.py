@@ -77,8 +77,12 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
         lines = "".join(stdout).splitlines()
         return sum(line.startswith("| ") for line in lines) - 1  # less the header
 
+    vector_calls: list[dict] = []
+
     def stand_in(name, value):
         def f(*args, **kwargs):
+            if name == "vector":
+                vector_calls.append(kwargs)
             seen.append((name, rows_printed()))
             return value
         return f
@@ -110,13 +114,15 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     assert main(["bench", "speed", "--quick", "--out", str(tmp_path)]) == 0
     total = rows_printed()
     # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
-    # general kernel, float32, the batch simulation and its float32 row, then
+    # general kernel, ETDRK4, float32, the batch simulation and its float32 row, then
     # CartPole/single/speed-up once both are measured, 2 cold-start rows, the memory
     assert seen == [("run-up generic", 0), ("run-up specialised", 1), ("stepping", 2),
                     ("vector", 4), ("vector", 5), ("vector", 6), ("vector", 7),
-                    ("vector", 8), ("batch", 9), ("batch", 10), ("single", 11),
-                    ("cartpole", 11), ("cold", 14), ("memory", 16), ("effects", 17)]
-    assert total == 18
+                    ("vector", 8), ("vector", 9), ("batch", 10), ("batch", 11),
+                    ("single", 12), ("cartpole", 12), ("cold", 15), ("memory", 17),
+                    ("effects", 18)]
+    assert total == 19
+    assert [kw.get("integrator", "rk4") for kw in vector_calls].count("etdrk4") == 1
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")
 
