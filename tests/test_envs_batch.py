@@ -168,3 +168,85 @@ def test_staggered_zeros_places_the_start_and_keeps_the_shape():
         assert a.shape == (3, 5, 7) and a.dtype == np.float32 and a.flags.c_contiguous
         assert a.ctypes.data % 4096 == (slot * batch.STAGGER) % 4096
         assert not a.any()
+
+
+def _check_lane_order(step_sizes, lanes, parts):
+    order = batch.lane_order(step_sizes, lanes, parts)
+    n = len(step_sizes)
+    assert order.dtype == np.int64 and np.array_equal(np.sort(order), np.arange(n))
+    n_blocks = -(-n // lanes)
+    runs = max(1, min(parts, n_blocks))
+    edges = [min(k * n_blocks // runs * lanes, n) for k in range(runs)] + [n]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        # each thread's run of blocks holds its own contiguous rows, stably sorted by step
+        assert np.array_equal(np.sort(order[lo:hi]), np.arange(lo, hi))
+        expected = lo + np.argsort(np.asarray(step_sizes)[lo:hi], kind="stable")
+        assert np.array_equal(order[lo:hi], expected)
+    return order
+
+
+def test_lane_order_sorts_each_threads_run_of_blocks():
+    # the vector environment at 1024 on two threads: 8 blocks of 128, two runs of four
+    rng = np.random.default_rng(5)
+    h = rng.uniform(1.0e-3, 1.67e-3, 1024)
+    whole = batch.lane_order(h)
+    assert np.array_equal(whole, np.argsort(h, kind="stable"))
+    order = _check_lane_order(h, 128, 2)
+    substeps = np.ceil(0.01 / h[order] - 1e-9).reshape(8, 128).max(axis=1)
+    by_run = substeps[:4].sum(), substeps[4:].sum()
+    sorted_whole = np.ceil(0.01 / h[whole] - 1e-9).reshape(8, 128).max(axis=1)
+    # the point of the runs: the two threads' work is closer than with one sort
+    assert abs(by_run[0] - by_run[1]) < abs(sorted_whole[:4].sum() - sorted_whole[4:].sum())
+
+
+def test_lane_order_property():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.lists(st.sampled_from([1e-3, 1.1e-3, 1.25e-3, 2e-3]), min_size=1, max_size=300),
+           st.integers(1, 130), st.integers(1, 9))
+    def check(step_sizes, lanes, parts):
+        _check_lane_order(step_sizes, lanes, parts)
+
+    check()
+
+
+def test_vector_env_sorts_per_thread_and_keeps_its_results():
+    # two threads: each run of blocks sorts its own rows; one thread: one sort.  The order only
+    # decides which lanes share a block, so the steps give the same bits either way.
+    numba = pytest.importorskip("numba")
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two numba threads")
+    import gymnasium as gym
+    from abb_gym.envs.layout import S_DTMAX
+
+    def run(threads):
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            env = gym.make_vec("abb_gym/RunUpSpeed-v0", num_envs=300,
+                               vectorization_mode="vector_entry_point", scene="yoshida_odd",
+                               preset="train", control_interval=0.01)
+            env.reset(seed=11)
+            bufs = env.unwrapped._bufs
+            h = bufs.st[:, S_DTMAX].copy()
+            order = bufs.order.copy()
+            rng = np.random.default_rng(2)
+            outs = [env.step(rng.uniform(-1, 1, (300, 1)).astype(np.float32))[:2]
+                    for _ in range(15)]
+            env.close()
+            return h, order, bufs.blocks.lanes, outs
+        finally:
+            numba.set_num_threads(before)
+
+    h1, order1, lanes, outs1 = run(1)
+    h2, order2, lanes2, outs2 = run(2)
+    assert lanes == lanes2 and np.array_equal(h1, h2)
+    assert np.array_equal(order1, np.argsort(h1, kind="stable"))
+    n_blocks = -(-300 // lanes)
+    if n_blocks >= 2:
+        _check_lane_order(h2, lanes, 2)
+        assert not np.array_equal(order1, order2)
+    for (obs1, rew1), (obs2, rew2) in zip(outs1, outs2):
+        assert np.array_equal(obs1, obs2) and np.array_equal(rew1, rew2)

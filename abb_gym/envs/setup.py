@@ -198,8 +198,12 @@ class Buffers:
         return kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
 
     def sort_lanes(self) -> None:
-        """Group rows of equal step size into the same blocks (after resets)."""
-        self.order[:] = batch.lane_order(self.st[:, S_DTMAX])
+        """Group rows of equal step size into the same blocks (after resets), sorted per
+        thread's run of blocks (:func:`abb_gym.physics.batch.lane_order`)."""
+        lanes = self.blocks.lanes
+        parts = batch.thread_parts(self.blocks.s.shape[0]) if self._stepper() is \
+            kernel.step_parallel else 1
+        self.order[:] = batch.lane_order(self.st[:, S_DTMAX], lanes, parts)
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
