@@ -200,10 +200,9 @@ class Buffers:
     def sort_lanes(self) -> None:
         """Group rows of equal step size into the same blocks (after resets), sorted per
         thread's run of blocks (:func:`abb_gym.physics.batch.lane_order`)."""
-        lanes = self.blocks.lanes
-        parts = batch.thread_parts(self.blocks.s.shape[0]) if self._stepper() is \
-            kernel.step_parallel else 1
-        self.order[:] = batch.lane_order(self.st[:, S_DTMAX], lanes, parts)
+        # (one block: one run, stepped serially)
+        self.order[:] = batch.lane_order(self.st[:, S_DTMAX], self.blocks.lanes,
+                                         batch.thread_parts())
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()

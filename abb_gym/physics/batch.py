@@ -145,9 +145,10 @@ def lane_order(step_sizes: np.ndarray, lanes: int = 1, parts: int = 1) -> np.nda
     """Rows in the order of their step size (stable), so that environments that take as many
     steps per interval share blocks and no block waits for one slow lane.
 
-    ``parts`` > 1 (the threads of the parallel loop over blocks, :func:`thread_parts`): the
-    blocks of ``lanes`` rows are cut into that many contiguous runs, as numba's parallel loop
-    hands them to its threads, and each run sorts its own contiguous range of rows.  Sorted as
+    ``parts`` > 1 (the threads of the parallel loop over blocks, :func:`thread_parts`; at
+    most one run per block): the blocks of ``lanes`` rows are cut into that many contiguous
+    runs, as numba's parallel loop hands them to its threads, and each run sorts its own
+    contiguous range of rows.  Sorted as
     a whole, the first thread got the blocks of the smallest steps, i.e. the most substeps: at
     1024 sub-environments of ``yoshida_odd`` 37 block-substeps per control step against the
     second thread's 30; sorted per run, 34 and 34 (the vector environment's compiled step 3 %
@@ -163,10 +164,10 @@ def lane_order(step_sizes: np.ndarray, lanes: int = 1, parts: int = 1) -> np.nda
     return np.concatenate(order).astype(np.int64)
 
 
-def thread_parts(n_blocks: int) -> int:
-    """How many threads the parallel loop over ``n_blocks`` blocks runs on (numba's current
-    thread count, at most one per block): the ``parts`` of :func:`lane_order`."""
-    return max(1, min(get_num_threads(), n_blocks))
+def thread_parts() -> int:
+    """The threads of a parallel loop over blocks (numba's current thread count): the
+    ``parts`` of :func:`lane_order`, which caps them at one per block."""
+    return get_num_threads()
 
 
 # Bytes between the block arrays' start addresses, modulo 4096 (:func:`staggered_zeros`).
@@ -582,7 +583,7 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.ME
     dt_max = np.broadcast_to(np.asarray(dt_max, float), (n_env,)).copy()
     lanes = lanes_per_block(n_env) if lanes is None else int(lanes)
     if order is None:
-        order = lane_order(dt_max, lanes, thread_parts(-(-n_env // lanes)))
+        order = lane_order(dt_max, lanes, thread_parts())
     order = np.asarray(order, np.int64)
     nseg = np.asarray(nseg, np.int64)
     seg_d = np.ascontiguousarray(seg_d, float)
