@@ -124,6 +124,9 @@ def test_mass_matrix_symmetric_positive_definite_and_matches_kinematics(n_balls)
         mm = mdl.mass_matrix(q, p, b)
         assert np.array_equal(mm, mm.T)
         assert np.linalg.eigvalsh(mm).min() > 0
+        # the equations read I_i and 1 / I_i from the packed columns (model.ball_inertias)
+        assert np.array_equal(np.diag(mm)[3:], b[:, mdl.B_II])
+        assert np.array_equal(b[:, mdl.B_INV], 1.0 / b[:, mdl.B_II])
         ref = Kinematics(scene).mass_matrix(q)
         np.testing.assert_allclose(mm, ref, rtol=1e-7, atol=1e-12 * np.abs(ref).max())
 

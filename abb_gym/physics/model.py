@@ -126,10 +126,13 @@ EXTENDED_EFFECTS = frozenset({"gravity", "ball_contact", "fluid_drag", "virtual_
 # per-ball parameter matrix columns: mass [kg], radius [m], spin inertia [kg m^2], race drag
 # torque coefficient [N m s], rolling-resistance offset / radius [-]; added relative inertia
 # of the virtual mass [kg m^2], Stokes drag coefficient [N s/m], rho pi r^2 / 2 [kg/m],
-# Reynolds number per relative speed 2 r / nu [s/m], effective track mass I_i / R^2 [kg]
+# Reynolds number per relative speed 2 r / nu [s/m], effective track mass I_i / R^2 [kg];
+# then the ball's constant mass-matrix entries (ball_inertias): c_i without the race
+# eccentricity [kg m^2], I_i with any virtual mass [kg m^2], and 1 / I_i [1/(kg m^2)]
 B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
 B_VM, B_KLIN, B_KQUAD, B_REU, B_MEFF = range(5, 10)
-N_BALL_PARAMS = 10
+B_CI, B_II, B_INV = range(10, 13)
+N_BALL_PARAMS = 13
 # scratch of the contact forces, work[ball, column, lane]
 WORK_COLUMNS = 7
 W_QC = 0  # generalised contact force on the ball [N m]
@@ -199,16 +202,41 @@ def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         b[:, B_REU] = 2.0 * a["ball_radius"] / nu
     b[:, B_MEFF] = (b[:, B_INERTIA] / a["ball_radius"] ** 2 + b[:, B_MASS]
                     + b[:, B_VM] / big_r ** 2)
+    b[:, B_CI], b[:, B_II], b[:, B_INV] = ball_inertias(
+        b[:, B_MASS], b[:, B_RADIUS], b[:, B_INERTIA], big_r, b[:, B_VM])
     return p, b
 
 
+def ball_inertias(m, r, ji, big_r, vm):
+    """The constant mass-matrix entries of balls of mass ``m`` [kg], radius ``r`` [m] and spin
+    inertia ``ji`` [kg m^2] on a track of radius ``big_r`` [m] with virtual mass ``vm``
+    [kg m^2] (numbers or arrays): ``(c_i, I_i, 1 / I_i)`` with ``c_i = m R^2 - J_i R / r``
+    (the rotor coupling before the race eccentricity's term) and ``I_i = J_i R^2 / r^2 + m R^2
+    + vm`` [kg m^2].
+
+    They depend on the episode only; computed at every right-hand side they cost three
+    divisions per ball, half of the divisions of ``yoshida_odd``'s vectorised right-hand side
+    (12 -> 6), so :func:`pack_parameters` stores them, and the equations, the mass matrix and
+    the drag rates of ETDRK4 read them from there (one formula for I_i, where the drag rates
+    had a copy).  ``python -m abb_gym.benchmarks.rhs_cost`` at 128 lanes: 22.3-22.5 -> 20.0-20.9
+    ns per lane (two alternated runs each); the vector environment's step did not change
+    beyond the noise (ten alternated whole-process pairs, median ratio 1.0).  The operations
+    and their order are those the kernels did at each call, so float64 runs give the same bits
+    as before; a float32 block now rounds these float64 values once instead of computing
+    them in float32."""
+    mr = m * big_r
+    ii = ji * big_r * big_r / (r * r) + mr * big_r + vm
+    return mr * big_r - ji * big_r / r, ii, 1.0 / ii
+
+
 @njit(cache=True, inline="always")
-def _ball_coupling(th, ph, m, r, ji, big_r, e, gam, ecc):
-    """Mass-matrix entries of one ball: (col_x, col_y, c_i, I_i, its share of Jt, sin(th+ph),
-    cos(th+ph), sin(gam-ph), cos(gam-ph)); the last two 0 without eccentricity."""
+def _ball_coupling(th, ph, m, ji, big_r, ci, e, gam, ecc):
+    """Mass-matrix entries of one ball that change with the angles: (col_x, col_y, c_i, its
+    share of Jt, sin(th+ph), cos(th+ph), sin(gam-ph), cos(gam-ph)); the last two 0 without
+    eccentricity.  ``ci``: c_i without the eccentricity (column ``B_CI``, :func:`ball_inertias`,
+    which holds the constant I_i too)."""
     mr = m * big_r
     s, c = el.sincos(th + ph)
-    ci = mr * big_r - ji * big_r / r
     jt = ji + mr * big_r
     sgp = el.like(th, 0.0)
     cgp = el.like(th, 0.0)
@@ -216,7 +244,7 @@ def _ball_coupling(th, ph, m, r, ji, big_r, e, gam, ecc):
         sgp, cgp = el.sincos(gam - ph)
         ci += e * mr * cgp
         jt += m * e * e + el.like(e, 2.0) * e * mr * cgp
-    return -mr * s, mr * c, ci, ji * big_r * big_r / (r * r) + mr * big_r, jt, s, c, sgp, cgp
+    return -mr * s, mr * c, ci, jt, s, c, sgp, cgp
 
 
 @njit(cache=True)
@@ -237,8 +265,8 @@ def mass_matrix(q, p, b):
         if ecc:
             sx += p[P_E] * b[i, B_MASS] * stg
             cy += p[P_E] * b[i, B_MASS] * ctg
-        colx, coly, ci, ii, jti, _, _, _, _ = _ball_coupling(
-            th, q[3 + i], b[i, B_MASS], b[i, B_RADIUS], b[i, B_INERTIA], p[P_R], p[P_E],
+        colx, coly, ci, jti, _, _, _, _ = _ball_coupling(
+            th, q[3 + i], b[i, B_MASS], b[i, B_INERTIA], p[P_R], b[i, B_CI], p[P_E],
             p[P_GAM], ecc)
         sx -= colx
         cy += coly
@@ -247,9 +275,9 @@ def mass_matrix(q, p, b):
         mm[0, k] = mm[k, 0] = colx
         mm[1, k] = mm[k, 1] = coly
         mm[2, k] = mm[k, 2] = ci
-        # the virtual mass of the fluid (0 unless that effect is on) adds to the relative
-        # inertia only: the fluid moves with the rotor otherwise
-        mm[k, k] = ii + b[i, B_VM]
+        # (B_II holds the virtual mass of the fluid, 0 unless that effect is on: it adds to
+        # the relative inertia only, the fluid moves with the rotor otherwise)
+        mm[k, k] = b[i, B_II]
     mm[0, 0] = total
     mm[1, 1] = total
     mm[2, 2] = jt
@@ -301,25 +329,23 @@ def lanes_of(s, spec):
 @njit(cache=True, inline="always")
 def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     """One ball's terms of the equations (module docstring), from scalars only, so that the
-    lane loop that calls it vectorises: (col_x, col_y, c_i, I_i, its Jt share, its Sx and Cy
-    shares, its x and y forces, its rotor torque, the generalised force Q_i and the rows
+    lane loop that calls it vectorises: (col_x, col_y, c_i, 1 / I_i, its Jt share, its Sx and
+    Cy shares, its x and y forces, its rotor torque, the generalised force Q_i and the rows
     b_x, b_y, b_th of the ball equation ``I_i ph'' + b_x x'' + b_y y'' + b_th th'' = Q_i``).
 
     The inputs come in tuples (a call with more than 30 arguments compiles to a star-args
-    call, which numba cannot inline): ``ball`` (m, r, J_i, beta_i, mu_r / r, virtual mass),
-    ``geometry`` (R, u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs``
+    call, which numba cannot inline): ``ball`` (m, J_i, c_i without the eccentricity, 1 / I_i
+    with any virtual mass: columns ``B_CI``, ``B_INV``, beta_i, mu_r / r), ``geometry`` (R, u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs``
     (contact Q and N, the drag law's coefficients, the friction law's), ``flags`` (ext, ecc,
     roll, grav, touch, fric: compile-time constants of the specialised kernels)."""
-    m, r, ji, beta, mur, vm = ball
+    m, ji, ci0, inv, beta, mur = ball
     big_r, ureg, e, gam, stg, ctg, gx, gy = geometry
     (qc, nc, klin, kquad, reu, dlaw, a0, a1, a2, a3, plateau, muk, mus, ufr,
      ustr) = extended_inputs
     ext, ecc, roll, grav, touch, fric = flags
     mr = m * big_r
-    colx, coly, ci, ii, jti, sp, cp, sgp, cgp = _ball_coupling(th, ph, m, r, ji, big_r, e,
-                                                               gam, ecc)
-    if ext:
-        ii += vm
+    colx, coly, ci, jti, sp, cp, sgp, cgp = _ball_coupling(th, ph, m, ji, big_r, ci0, e, gam,
+                                                           ecc)
     sx = -colx
     cy = coly
     wrel2 = (w + dph) * (w + dph)
@@ -370,7 +396,7 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
             bth += kr * e * sgp
         if ext and touch:
             fi -= kr * nc / m
-    return colx, coly, ci, ii, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
+    return colx, coly, ci, inv, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
@@ -463,10 +489,10 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         g1 = zero
         g2 = zero
         for i in range(nb):
-            colx, coly, ci, ii, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
+            colx, coly, ci, inv, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
                 th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
-                (b[i, B_MASS, l], b[i, B_RADIUS, l], b[i, B_INERTIA, l], b[i, B_BETA, l],
-                 b[i, B_MUR, l], b[i, B_VM, l]), geometry,
+                (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_INV, l],
+                 b[i, B_BETA, l], b[i, B_MUR, l]), geometry,
                 (work[i, W_QC, l], work[i, W_NC, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
                  b[i, B_REU, l]) + law, flags)
             sx += sxi
@@ -477,7 +503,6 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             fth += fthi
             if not motor:
                 fi -= bth * alpha
-            inv = el.like(ii, 1.0) / ii
             work[i, W_FI, l] = fi
             work[i, W_BX, l] = bx
             work[i, W_BY, l] = by
@@ -673,10 +698,6 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
         big_r = p[P_R, l]
         for i in range(nb):
             m = b[i, B_MASS, l]
-            r = b[i, B_RADIUS, l]
-            ii = b[i, B_INERTIA, l] * big_r * big_r / (r * r) + m * big_r * big_r
-            if ext:
-                ii += b[i, B_VM, l]
             rate = b[i, B_BETA, l]
             dph = s[nq + 3 + i, l]
             if roll:
@@ -697,7 +718,7 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                         normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
                     rate += big_r * big_r * abs(normal) * friction_secant(
                         big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
-            lam[nq + 3 + i, l] = rate / ii
+            lam[nq + 3 + i, l] = rate / b[i, B_II, l]
             if ext and p[P_KC, l] != 0.0:
                 lam[nq + 3 + i, l] += _contact.contact_rate_lane(s, l, i, b, B_RADIUS, B_MEFF,
                                                                  big_r, p[P_KC, l], p[P_ZC, l])
