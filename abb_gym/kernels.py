@@ -50,11 +50,13 @@ def _env(kind: str) -> Callable[[], None]:
 def _vector(kind: str, kernel: str, num_envs: int) -> Callable[[], None]:
     def run():
         import gymnasium as gym
+        import numpy as np
         from . import envs  # noqa: F401
         env = gym.make_vec(kind, num_envs=num_envs, vectorization_mode="vector_entry_point",
                            kernel=kernel)
         env.reset(seed=0)
         env.step(env.action_space.sample())
+        env.step(np.zeros(env.action_space.shape))  # float64 actions (envs.step_rows)
     return run
 
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..physics import runup
+from .step_rows import StepRows, read_step
 from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
                      TERM_NAMES)
 
@@ -50,8 +51,9 @@ def _state_column(name: str, nq: int):
     return nq + 2 if name == "rotor_speed" else slice(3, nq)
 
 
-def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
-    """The lean keys: ``reward_terms`` and, on a failure, ``failure``."""
+def _terms_and_failure(setup, out, st, s, read: StepRows | None = None) -> dict[str, Any]:
+    """The lean keys: ``reward_terms`` and, on a failure, ``failure`` (all rows: from
+    ``read``, what :func:`~abb_gym.envs.step_rows.read_step` read of ``out``, if given)."""
     if out.ndim == 1:
         # one row: one tolist() instead of six numpy scalar reads (the single
         # environment's lean info 2.5 -> 1.8 us a step)
@@ -61,9 +63,10 @@ def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
         if code:
             info["failure"] = setup.failure_message(int(code), out, st, s)
         return info
-    info = {"reward_terms": {name: out[:, col].copy() for name, col in _TERMS}}
-    code = out[:, O_FCODE]
-    if code.any():
+    rows = read if read is not None else read_step(out)
+    info = {"reward_terms": dict(zip(TERM_NAMES, rows.terms))}
+    if rows.any_failed:
+        code = out[:, O_FCODE]
         msgs = np.full(code.shape[0], None, dtype=object)
         for i in np.flatnonzero(code):
             msgs[i] = setup.failure_message(int(code[i]), out[i], st[i], s[i])
@@ -72,14 +75,15 @@ def _terms_and_failure(setup, out, st, s) -> dict[str, Any]:
 
 
 def step_info(setup, out: np.ndarray, st: np.ndarray, s: np.ndarray, ref_len,
-              level: str = "full", done=None) -> dict[str, Any]:
+              level: str = "full", done=None, read: StepRows | None = None) -> dict[str, Any]:
     """The per-step keys from the buffers ``out``, ``st``, ``s``: pass one row (1-D views:
     the single environment gets Python scalars) or every row (2-D: arrays over rows).
 
     ``level`` "full": every key; "lean": ``reward_terms`` (and ``failure``) only, plus every
     key when an episode ends (``done``: bool, or a bool array over rows), so that the final
-    info of an episode always carries its run-up metrics."""
-    info = _terms_and_failure(setup, out, st, s)
+    info of an episode always carries its run-up metrics.  ``read``: every row's
+    :func:`~abb_gym.envs.step_rows.read_step` of ``out``, if the caller has it."""
+    info = _terms_and_failure(setup, out, st, s, read)
     # a Python bool for one row: np.any on it costs more than the rest of the lean info
     if level == "lean" and not (done if isinstance(done, bool) else np.any(done)):
         return info

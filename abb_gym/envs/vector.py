@@ -83,13 +83,14 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import as_action_array
+from .actions import checked_action
 from .display import check_display
 from .info import masked, step_info
-from .layout import O_REWARD, O_TERM, O_TRUNC, S_K
+from .layout import S_K
 from .rendering import Renderer
 from . import episodes
 from .episodes import EpisodeTable
+from .step_rows import StepRows, check_actions, read_step
 from .setup import (Buffers, EnvSetup, SetupAccess, check_flag, check_memory, check_seed,
                     draw_safely)
 
@@ -278,13 +279,15 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
             raise gym.error.ResetNeeded("call reset() before step()")
         bf = self._bufs
         n = self.num_envs
-        a = as_action_array(actions, (n,) + self.single_action_space.shape, "actions")
-        finite = np.isfinite(a)
-        if not finite.all():
-            bad = np.argwhere(~finite)[0]
-            raise ValueError(f"actions must be finite; entry {tuple(int(v) for v in bad)} is "
+        a = checked_action(actions, (n,) + self.single_action_space.shape, "actions")
+        if a.dtype != np.float32 and a.dtype != np.float64:
+            a = a.astype(np.float64)
+        bad, outside = check_actions(a.reshape(n, -1))
+        if bad >= 0:
+            raise ValueError(f"actions must be finite; entry "
+                             f"{tuple(int(v) for v in np.unravel_index(bad, a.shape))} is "
                              f"not (no sub-environment was stepped)")
-        if not self._warned_clip and (a.max() > 1.0 or a.min() < -1.0):
+        if not self._warned_clip and outside:
             logger.warn("actions outside [-1, 1] were clipped (warned once)")
             self._warned_clip = True
         rows = np.flatnonzero(self._prev_done)
@@ -293,7 +296,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
             bf.active[:] = 1
             bf.active[rows] = 0
             bf.sort_lanes()
-        bf.act[:] = np.clip(a, -1.0, 1.0)
+        np.clip(a, -1.0, 1.0, out=bf.act)
         am = self.setup.actions
         if am.works_before_step:
             for i in np.flatnonzero(bf.active):
@@ -307,24 +310,23 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         if rows.size:
             bf.observe(rows)  # (and their frame stacks start again)
             bf.active[:] = 1
-        out = bf.out
-        terminated = out[:, O_TERM] != 0.0
-        truncated = out[:, O_TRUNC] != 0.0
-        reward = out[:, O_REWARD].copy()
-        self._prev_done = terminated | truncated
-        mask = np.ones(n, dtype=bool)
-        info = self._info(mask, reset_rows=rows, done=self._prev_done)
-        return bf.observations.copy(), reward, terminated, truncated, info
+        read = read_step(bf.out)
+        self._prev_done = read.done
+        info = self._info(np.ones(n, dtype=bool), reset_rows=rows, read=read)
+        return bf.observations.copy(), read.reward, read.terminated, read.truncated, info
 
     def _info(self, mask: np.ndarray, reset_rows: np.ndarray, level: str | None = None,
-              done: np.ndarray | None = None) -> dict[str, Any]:
+              read: StepRows | None = None) -> dict[str, Any]:
+        """The info of a step (``read``: what :func:`read_step` read after it) or of a reset
+        (``level`` "full")."""
         bf = self._bufs
         level = level or self.info_level
-        info = step_info(self.setup, bf.out, bf.st, bf.s, self._ref_len, level, done)
-        if level == "lean" and done is not None and done.any():
+        any_done = read is not None and read.any_done
+        info = step_info(self.setup, bf.out, bf.st, bf.s, self._ref_len, level, any_done, read)
+        if level == "lean" and any_done:
             # the details are for the rows whose episode ended
             terms = masked({"reward_terms": info.pop("reward_terms")}, mask)
-            info = masked(info, done)
+            info = masked(info, read.done)
             info.update(terms)
         else:
             info = masked(info, mask)
