@@ -148,8 +148,7 @@ def lane_order(step_sizes: np.ndarray, lanes: int = 1, parts: int = 1) -> np.nda
     ``parts`` > 1 (the threads of the parallel loop over blocks, :func:`thread_parts`; at
     most one run per block): the blocks of ``lanes`` rows are cut into that many contiguous
     runs, as numba's parallel loop hands them to its threads, and each run sorts its own
-    contiguous range of rows.  Sorted as
-    a whole, the first thread got the blocks of the smallest steps, i.e. the most substeps: at
+    contiguous range of rows.  Sorted as a whole, the first thread got the blocks of the smallest steps, i.e. the most substeps: at
     1024 sub-environments of ``yoshida_odd`` 37 block-substeps per control step against the
     second thread's 30; sorted per run, 34 and 34 (the vector environment's compiled step 3 %
     faster, median of 14 alternating rounds in one process).  The order changes which lanes

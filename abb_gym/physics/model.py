@@ -335,9 +335,10 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
 
     The inputs come in tuples (a call with more than 30 arguments compiles to a star-args
     call, which numba cannot inline): ``ball`` (m, J_i, c_i without the eccentricity, 1 / I_i
-    with any virtual mass: columns ``B_CI``, ``B_INV``, beta_i, mu_r / r), ``geometry`` (R, u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs``
-    (contact Q and N, the drag law's coefficients, the friction law's), ``flags`` (ext, ecc,
-    roll, grav, touch, fric: compile-time constants of the specialised kernels)."""
+    with any virtual mass: columns ``B_CI``, ``B_INV``, beta_i, mu_r / r), ``geometry`` (R,
+    u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs`` (contact Q and
+    N, the drag law's coefficients, the friction law's), ``flags`` (ext, ecc, roll, grav,
+    touch, fric: compile-time constants of the specialised kernels)."""
     m, ji, ci0, inv, beta, mur = ball
     big_r, ureg, e, gam, stg, ctg, gx, gy = geometry
     (qc, nc, klin, kquad, reu, dlaw, a0, a1, a2, a3, plateau, muk, mus, ufr,
