@@ -89,6 +89,41 @@ def test_vector_matches_single_envs_on_varied_machines_with_sync_noise_and_frame
     assert ends >= n and resets >= n
 
 
+@pytest.mark.parametrize("num_envs", [None, 16])
+def test_a_reset_environment_steps_like_a_new_one(num_envs):
+    """The lanes of the compiled step keep the parameters of the row they stepped last
+    (``envs.kernel.G_HELD``): after a reset to another machine (the varied preset draws
+    critical speed, damping, imbalance, drag per episode) an environment must step exactly
+    like a new one reset with the same seed, in the single environment (one lane) and in the
+    vector one (lanes of 4)."""
+    kw = dict(preset="varied", **SHORT)
+
+    def make():
+        if num_envs is None:
+            return gym.make(SPEED, **kw)
+        return make_vec(SPEED, num_envs, **kw)
+
+    shape = (1,) if num_envs is None else (num_envs, 1)
+    actions = np.random.default_rng(9).uniform(0.2, 1.0, size=(6,) + shape)
+
+    def run(env, seed):
+        obs, info = env.reset(seed=seed)
+        rows = [obs]
+        for a in actions:
+            obs, reward, *_ = env.step(a)
+            rows += [obs, np.atleast_1d(reward)]
+        return info, rows
+
+    used = make()
+    first, _ = run(used, 1)
+    second, stepped = run(used, 2)
+    fresh_info, fresh = run(make(), 2)
+    assert np.all(np.asarray(first["critical_speed_scale"])
+                  != np.asarray(second["critical_speed_scale"]))  # another machine
+    for a, b in zip(stepped, fresh):
+        assert np.array_equal(a, b)
+
+
 def test_vectorised_kernel_equals_the_general_one_with_sync_observation():
     n = 40
     vecs = [make_vec("abb_gym/RunUpSpeed-v0", n, kernel=k, preset="varied")

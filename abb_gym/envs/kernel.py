@@ -329,13 +329,20 @@ def _record_trace(i, s, p, b, st, cfg, obs, out, trace):
 G_STEPPING = batch.N_G      # what _begin found (ROW_*)
 G_INTEGRATE = batch.N_G + 1  # the row takes part in the next interval
 G_DONE = batch.N_G + 2      # the row's episode ended in this step
-N_G_ENV = batch.N_G + 3
+# the row whose episode's parameters the lane holds (-1: none; Buffers sets it).  A row's
+# parameters change only when its episode is reset, so a lane that held row i loads them
+# again only on another row or at the first step of an episode (st[i, S_K] == 0)
+G_HELD = batch.N_G + 3
+N_G_ENV = batch.N_G + 4
 
 
 @njit(cache=True, error_model="numpy", refcounts=False)
 def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
                 bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
     """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``).
+    A lane keeps the parameters of the row it stepped last (``G_HELD``): they are copied in
+    again only for another row or at an episode's first step, after the reset that wrote
+    them (the only writer of ``p`` and ``b``: :func:`abb_gym.envs.episodes.commit`).
     Compiled without reference counts (:mod:`abb_gym._numba`)."""
     n_env = order.shape[0]
     ns = s.shape[1]
@@ -360,7 +367,10 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
         g[G_STEPPING, l] = found
         if found == ROW_STEPS:
             g[G_INTEGRATE, l] = 1
-            batch.load_lane(s, p, b, i, sb, pb, bbq, f, l)
+            batch.load_state(s, i, sb, f, l)
+            if g[G_HELD, l] != i or st[i, S_K] == 0.0:
+                batch.load_parameters(p, b, i, pb, bbq, l)
+                g[G_HELD, l] = i
     while True:
         any_lane = False
         for l in range(lanes):

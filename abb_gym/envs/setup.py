@@ -30,7 +30,7 @@ from ..configuration import specs
 from .config import EnvConfig, PresetError, load_preset
 from .display import check_info_level
 from . import kernel
-from .kernel import N_G_ENV, observe_rows
+from .kernel import G_HELD, N_G_ENV, observe_rows
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT,
                      C_INFO_FULL, C_KIND, C_METHOD, C_NACT, C_NMAX, C_OBS_BALLS, C_OBS_TIME,
                      C_OVERSPEED, C_SETTLE, C_SPEED_HI, C_SPEED_LO, C_SYNC, C_SYNC_LAG,
@@ -162,6 +162,7 @@ class Buffers:
         self.cfg = setup.cfg
         self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV,
                                    precision=setup.config.precision)
+        self.blocks.g[:, G_HELD] = -1  # no lane holds a row's parameters yet
         self.order = np.arange(n, dtype=np.int64)
         self.n_balls = nb
         # blocks of one lane (a single environment, a few sub-environments): the kernel also

@@ -253,17 +253,33 @@ def rebase_angle(s, f, lane):
 @njit(cache=True, inline="always")
 def load_lane(s_rows, p_rows, b_rows, row, s, p, b, f, lane):
     """Copy environment ``row``'s state and parameters (row-major float64 arrays) into
-    ``lane`` of a block (lane-last arrays, float64 or float32; a float32 block takes whole
+    ``lane`` of a block (lane-last arrays, float64 or float32): :func:`load_state` and
+    :func:`load_parameters`."""
+    load_state(s_rows, row, s, f, lane)
+    load_parameters(p_rows, b_rows, row, p, b, lane)
+
+
+@njit(cache=True, inline="always")
+def load_state(s_rows, row, s, f, lane):
+    """Copy environment ``row``'s state into ``lane`` of a block (a float32 block takes whole
     turns of the rotor angle into ``f[F_THOFF]``)."""
     for c in range(s.shape[0]):
         s[c, lane] = s_rows[row, c]
+    if el.is_single(s):
+        _hold_angle(s_rows[row, 2], s, f, lane)
+
+
+@njit(cache=True, inline="always")
+def load_parameters(p_rows, b_rows, row, p, b, lane):
+    """Copy environment ``row``'s scalar and per-ball parameters into ``lane`` of a block.  A
+    caller that steps the same rows again and again (the environments) copies them only when
+    the lane held another row or the row's parameters changed: ``p`` and ``b`` are 57 of a
+    two-ball lane's 67 entries, each written to its own cache line."""
     for c in range(p.shape[0]):
         p[c, lane] = p_rows[row, c]
     for i in range(b.shape[0]):
         for c in range(b.shape[1]):
             b[i, c, lane] = b_rows[row, i, c]
-    if el.is_single(s):
-        _hold_angle(s_rows[row, 2], s, f, lane)
 
 
 @njit(cache=True, inline="always")
