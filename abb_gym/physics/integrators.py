@@ -90,37 +90,31 @@ def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
     ``noalias``: :mod:`abb_gym._numba`); compiled without reference counts (same module)."""
     n = s.shape[0]
     L = mdl.lanes_of(s, spec)
-    # two stage arrays, not four: each stage is added into ``acc`` as soon as it is known, in
-    # the order of ``k1 + 2 k2 + 2 k3 + k4`` (so the same bits as summing four stored
-    # stages), and the block's working set shrinks by two state-sized arrays
-    stage, acc = k[0], k[1]
+    k1, k2, k3, k4 = k[0], k[1], k[2], k[3]
     # constants in the arrays' precision (float64 or float32: elementary.like)
     half = el.like(h, 0.5)
     two = el.like(h, 2.0)
     six = el.like(h, 6.0)
-    mdl.accelerations_block(t, s, p, b, d, stage, work, nb, spec)
+    mdl.accelerations_block(t, s, p, b, d, k1, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            acc[j, l] = stage[j, l]
-            tmp[j, l] = s[j, l] + half * h[l] * stage[j, l]
+            tmp[j, l] = s[j, l] + half * h[l] * k1[j, l]
     for l in range(L):
         tt[l] = t[l] + half * h[l]
-    mdl.accelerations_block(tt, tmp, p, b, d, stage, work, nb, spec)
+    mdl.accelerations_block(tt, tmp, p, b, d, k2, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            acc[j, l] += two * stage[j, l]
-            tmp[j, l] = s[j, l] + half * h[l] * stage[j, l]
-    mdl.accelerations_block(tt, tmp, p, b, d, stage, work, nb, spec)
+            tmp[j, l] = s[j, l] + half * h[l] * k2[j, l]
+    mdl.accelerations_block(tt, tmp, p, b, d, k3, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            acc[j, l] += two * stage[j, l]
-            tmp[j, l] = s[j, l] + h[l] * stage[j, l]
+            tmp[j, l] = s[j, l] + h[l] * k3[j, l]
     for l in range(L):
         tt[l] = t[l] + h[l]
-    mdl.accelerations_block(tt, tmp, p, b, d, stage, work, nb, spec)
+    mdl.accelerations_block(tt, tmp, p, b, d, k4, work, nb, spec)
     for j in range(n):
         for l in range(L):
-            new = s[j, l] + h[l] / six * (acc[j, l] + stage[j, l])
+            new = s[j, l] + h[l] / six * (k1[j, l] + two * k2[j, l] + two * k3[j, l] + k4[j, l])
             s[j, l] = new if active[l] != 0 else s[j, l]
 
 
