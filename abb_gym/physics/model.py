@@ -133,11 +133,12 @@ B_MASS, B_RADIUS, B_INERTIA, B_BETA, B_MUR = range(5)
 B_VM, B_KLIN, B_KQUAD, B_REU, B_MEFF = range(5, 10)
 B_CI, B_II, B_INV = range(10, 13)
 N_BALL_PARAMS = 13
-# scratch of the contact forces, work[ball, column, lane]
-WORK_COLUMNS = 7
+# scratch of the right-hand side, work[ball, column, lane]: the contact forces, then each
+# ball's terms kept for the second pass (its 1 / I_i is read from B_INV again)
+WORK_COLUMNS = 6
 W_QC = 0  # generalised contact force on the ball [N m]
 W_NC = 1  # outward radial contact force on the ball [N]
-W_FI, W_BX, W_BY, W_BTH, W_INV = range(2, 7)
+W_FI, W_BX, W_BY, W_BTH = range(2, 6)
 # kernel specialisation: which terms exist (compile-time constants of the vector kernels)
 SPEC_EXT = 1       # an extended effect (gravity, contact, fluid drag, virtual mass, friction)
 SPEC_ECC = 2       # race eccentricity
@@ -407,7 +408,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
 
     Arrays carry the lane last: ``s``, ``ds`` (2 (3 + nb), L), ``p`` (N_PARAMS, L), ``b``
     (nb, N_BALL_PARAMS, L), ``d`` (N_DRIVE, L) the current drive row of each lane, ``work``
-    (nb, WORK_COLUMNS, L) scratch of the contact forces.  ``spec`` (``SPEC_*`` bits) says which
+    (nb, WORK_COLUMNS, L) scratch (the contact forces, the balls' terms).  ``spec`` (``SPEC_*`` bits) says which
     terms exist; with ``nb`` and ``spec`` compile-time constants (literal types given by
     :class:`~abb_gym.physics.specialise.Specialised`: one compilation per literal pair) the
     lane loop compiles to straight-line code over all lanes at once (AVX2: four lanes per instruction,
@@ -417,8 +418,8 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     which spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
-    ball; each ball's terms (generalised force, coupling columns, inverse inertia) are kept
-    in ``work`` for the second pass, which solves for the balls' accelerations."""
+    ball; each ball's terms (generalised force, the rows of its equation) are kept in
+    ``work`` for the second pass, which solves for the balls' accelerations."""
     L = lanes_of(s, spec)
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
@@ -507,8 +508,8 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             work[i, W_FI, l] = fi
             work[i, W_BX, l] = bx
             work[i, W_BY, l] = by
-            work[i, W_BTH, l] = bth
-            work[i, W_INV, l] = inv
+            if motor:
+                work[i, W_BTH, l] = bth
             d00 += colx * bx * inv
             d01 += colx * by * inv
             d10 += coly * bx * inv
@@ -561,7 +562,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
             if motor:
                 qi -= work[i, W_BTH, l] * ath
-            ds[nq + 3 + i, l] = qi * work[i, W_INV, l]
+            ds[nq + 3 + i, l] = qi * b[i, B_INV, l]
         ds[0, l] = vx
         ds[1, l] = vy
         ds[2, l] = s[nq + 2, l] if motor else w
