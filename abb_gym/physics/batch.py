@@ -253,33 +253,19 @@ def rebase_angle(s, f, lane):
 @njit(cache=True, inline="always")
 def load_lane(s_rows, p_rows, b_rows, row, s, p, b, f, lane):
     """Copy environment ``row``'s state and parameters (row-major float64 arrays) into
-    ``lane`` of a block (lane-last arrays, float64 or float32): :func:`load_state` and
-    :func:`load_parameters`."""
-    load_state(s_rows, row, s, f, lane)
-    load_parameters(p_rows, b_rows, row, p, b, lane)
-
-
-@njit(cache=True, inline="always")
-def load_state(s_rows, row, s, f, lane):
-    """Copy environment ``row``'s state into ``lane`` of a block (a float32 block takes whole
-    turns of the rotor angle into ``f[F_THOFF]``)."""
+    ``lane`` of a block (lane-last arrays, float64 or float32; a float32 block takes whole
+    turns of the rotor angle into ``f[F_THOFF]``).  The environments' step copies a row in
+    only when its lane does not hold it already (:func:`abb_gym.envs.kernel._block_step`):
+    67 entries of a two-ball lane, each written to its own cache line."""
     for c in range(s.shape[0]):
         s[c, lane] = s_rows[row, c]
-    if el.is_single(s):
-        _hold_angle(s_rows[row, 2], s, f, lane)
-
-
-@njit(cache=True, inline="always")
-def load_parameters(p_rows, b_rows, row, p, b, lane):
-    """Copy environment ``row``'s scalar and per-ball parameters into ``lane`` of a block.  A
-    caller that steps the same rows again and again (the environments) copies them only when
-    the lane held another row or the row's parameters changed: ``p`` and ``b`` are 57 of a
-    two-ball lane's 67 entries, each written to its own cache line."""
     for c in range(p.shape[0]):
         p[c, lane] = p_rows[row, c]
     for i in range(b.shape[0]):
         for c in range(b.shape[1]):
             b[i, c, lane] = b_rows[row, i, c]
+    if el.is_single(s):
+        _hold_angle(s_rows[row, 2], s, f, lane)
 
 
 @njit(cache=True, inline="always")
@@ -435,41 +421,43 @@ def advance_block(s, p, b, d, k, tmp, lam, coef, work, f, g, act, seg_d, method,
         if g[G_ON, l] != 0 and f[W_SYNC, l] != 0.0:
             sync = True
     while True:
-        running = False
+        # lanes at a piece's end or start (a few substeps in a control interval): scalar
         for l in range(L):
-            act[l] = 0
-            if g[G_RUN, l] == 0:
+            if g[G_RUN, l] == 0 or g[G_LEFT, l] != 0:
                 continue
-            if g[G_LEFT, l] == 0:
-                # (the table view only here, at a piece's start: a view per lane and substep
-                # cost two atomic reference counts, on a count both threads share)
-                table = seg_d[g[G_ROW, l]]
-                if g[G_IX, l] >= 0:
-                    # a piece is done: its end is the next piece's start
-                    f[F_TP, l] = f[F_PE, l]
-                    dl.pin_prescribed(f[F_TP, l], s, l, table[g[G_J, l]], nq, f[F_THOFF, l])
-                t = f[F_TP, l]
-                if t >= f[F_T1, l]:
-                    g[G_RUN, l] = 0
-                    continue
-                nseg = g[G_NSEG, l]
-                j = integ.enter_segment(t, s, l, table, nseg, g[G_J, l], nq, f[F_THOFF, l])
-                piece_end, m, hh = integ.next_piece(t, f[F_T1, l], table, nseg, j, f[F_HMAX, l])
-                g[G_J, l] = j
-                g[G_LEFT, l] = m
-                g[G_IX, l] = 0
-                f[F_PE, l] = piece_end
-                h[l] = hh
-                if f[W_SYNC, l] != 0.0:
-                    f[W_GAIN, l] = sensors.filter_gain(hh, f[W_LAG, l])
-                _start_piece(d, l, table, j, t, f[F_THOFF, l])
+            # (the table view only here, at a piece's start: a view per lane and substep
+            # cost two atomic reference counts, on a count both threads share)
+            table = seg_d[g[G_ROW, l]]
+            if g[G_IX, l] >= 0:
+                # a piece is done: its end is the next piece's start
+                f[F_TP, l] = f[F_PE, l]
+                dl.pin_prescribed(f[F_TP, l], s, l, table[g[G_J, l]], nq, f[F_THOFF, l])
+            t = f[F_TP, l]
+            if t >= f[F_T1, l]:
+                g[G_RUN, l] = 0
+                continue
+            nseg = g[G_NSEG, l]
+            j = integ.enter_segment(t, s, l, table, nseg, g[G_J, l], nq, f[F_THOFF, l])
+            piece_end, m, hh = integ.next_piece(t, f[F_T1, l], table, nseg, j, f[F_HMAX, l])
+            g[G_J, l] = j
+            g[G_LEFT, l] = m
+            g[G_IX, l] = 0
+            f[F_PE, l] = piece_end
+            h[l] = hh
+            if f[W_SYNC, l] != 0.0:
+                f[W_GAIN, l] = sensors.filter_gain(hh, f[W_LAG, l])
+            _start_piece(d, l, table, j, t, f[F_THOFF, l])
+        # every lane's step: a loop without branches, which vectorises
+        running = 0
+        for l in range(L):
+            on = g[G_RUN, l] != 0
             tc[l] = f[F_TP, l] + g[G_IX, l] * h[l]
             if single:
                 rt[l] = g[G_IX, l] * h[l]
                 rh[l] = h[l]
-            act[l] = 1
-            running = True
-        if not running:
+            act[l] = 1 if on else 0
+            running += act[l]
+        if running == 0:
             break
         if method == integ.METHOD_ETDRK4:
             integ._etdrk4_step(rt, rh, s, p, b, d, k, tmp, rtt, wb, lam, coef, act, nb, spec)
