@@ -91,8 +91,8 @@ def test_vector_matches_single_envs_on_varied_machines_with_sync_noise_and_frame
 
 @pytest.mark.parametrize("num_envs", [None, 16])
 def test_a_reset_environment_steps_like_a_new_one(num_envs):
-    """The lanes of the compiled step keep the parameters of the row they stepped last
-    (``envs.kernel.G_HELD``): after a reset to another machine (the varied preset draws
+    """The lanes of the compiled step keep the state and parameters of the row they stepped
+    last (``envs.kernel.G_HELD``): after a reset to another machine (the varied preset draws
     critical speed, damping, imbalance, drag per episode) an environment must step exactly
     like a new one reset with the same seed, in the single environment (one lane) and in the
     vector one (lanes of 4)."""

@@ -329,9 +329,10 @@ def _record_trace(i, s, p, b, st, cfg, obs, out, trace):
 G_STEPPING = batch.N_G      # what _begin found (ROW_*)
 G_INTEGRATE = batch.N_G + 1  # the row takes part in the next interval
 G_DONE = batch.N_G + 2      # the row's episode ended in this step
-# the row whose episode's parameters the lane holds (-1: none; Buffers sets it).  A row's
-# parameters change only when its episode is reset, so a lane that held row i loads them
-# again only on another row or at the first step of an episode (st[i, S_K] == 0)
+# the row whose state and parameters the lane holds, as its last step left them (-1: none;
+# Buffers sets it).  Only a reset writes a row's parameters and state from outside the step
+# (episodes.commit), so a lane that held row i loads it again only for another row or at the
+# first step of an episode (st[i, S_K] == 0)
 G_HELD = batch.N_G + 3
 N_G_ENV = batch.N_G + 4
 
@@ -340,9 +341,13 @@ N_G_ENV = batch.N_G + 4
 def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs, bp, bb, bd,
                 bk, btmp, blam, bcoef, bwork, bf, bg, bact, nb, spec):
     """One environment step of every row in block ``q`` (rows ``order[q L : (q + 1) L]``).
-    A lane keeps the parameters of the row it stepped last (``G_HELD``): they are copied in
-    again only for another row or at an episode's first step, after the reset that wrote
-    them (the only writer of ``p`` and ``b``: :func:`abb_gym.envs.episodes.commit`).
+    A lane keeps the state and parameters of the row it stepped last (``G_HELD``): they are
+    copied in again only for another row, after a failed interval, or at an episode's first
+    step, after the reset that wrote them (the only writer of a row's ``s``, ``p`` and ``b``
+    outside the step: :func:`abb_gym.envs.episodes.commit`).  After a good interval the row
+    holds the lane's state (copied back) and the lane holds the row's: in float32 too (the
+    float64 copy of a float32 value converts back to the same float32, and ``rebase_angle``
+    leaves the rotor angle's offset as ``load_lane`` would set it).
     Compiled without reference counts (:mod:`abb_gym._numba`)."""
     n_env = order.shape[0]
     ns = s.shape[1]
@@ -367,9 +372,8 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
         g[G_STEPPING, l] = found
         if found == ROW_STEPS:
             g[G_INTEGRATE, l] = 1
-            batch.load_state(s, i, sb, f, l)
             if g[G_HELD, l] != i or st[i, S_K] == 0.0:
-                batch.load_parameters(p, b, i, pb, bbq, l)
+                batch.load_lane(s, p, b, i, sb, pb, bbq, f, l)
                 g[G_HELD, l] = i
     while True:
         any_lane = False
@@ -390,6 +394,8 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 for c in range(ns):
                     s[i, c] = batch.lane_value(sb, f, l, c)
                 batch.rebase_angle(sb, f, l)
+            else:
+                g[G_HELD, l] = -1  # the lane holds the failed state, the row the one before
             done = _interval_end(i, s, d, st, cfg, out, f, g, l)
             if done or not whole or g[batch.G_STATUS, l] != 0:
                 g[G_INTEGRATE, l] = 0
