@@ -65,7 +65,8 @@ def _kernel_steps(scene, profile, n_steps, dt):
     traj = np.empty((n_steps + 1, s.size))
     traj[0] = s
     t_pair = np.empty(2)
-    nb, spec = b.shape[0], mdl.spec_of(p, seg_d)
+    # one lane, as simulate runs it (model.SPEC_ONE_LANE: the lane and row counts constant)
+    nb, spec = b.shape[0], mdl.spec_of(p, seg_d) | mdl.SPEC_ONE_LANE
     step = integ.run.entry(integ.METHOD_RK4, s, t_pair, seg_t, seg_d, p, b, dt, 0.0,
                            integ._NO_ATOL, out, nb, spec)  # fetched once, as the envs do
     for k in range(n_steps):

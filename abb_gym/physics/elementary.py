@@ -40,9 +40,10 @@ wide: numba code compiled afterwards in the same process sees them too):
   holds 32 float32 lanes, and more of them spill); the vector environment at 1024
   sub-environments, where every lane loop of the step gains, in five alternated
   whole-process pairs: float64 x1.06-1.36 (median 1.10), float32 x0.99-1.10 (median 1.08).
-  It costs one-lane code (``simulate``) about 10 %: there the loop over the ten state rows is
-  the one that vectorises, and two vectors of 8 rows do not fit in 10 (README, "Two vectors
-  of lanes per pass").
+  In one-lane code the loop over the ten state rows is the one that vectorises, and two
+  vectors of 8 rows do not fit in 10: the step functions give one-lane blocks a constant row
+  count (:func:`abb_gym.physics.model.rows_of`), which LLVM unrolls instead (README, "Two
+  vectors of lanes per pass").
 
 The lane loops read and write many arrays; they are compiled with the
 promise that those do not overlap (``noalias``: :mod:`abb_gym._numba`), so LLVM needs no

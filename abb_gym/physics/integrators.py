@@ -88,7 +88,7 @@ def _rk4_step(t, h, s, p, b, d, k, tmp, tt, work, active, nb, spec):
     lanes with ``active[l] == 0`` are computed but keep their state (a masked update, so that
     the lane loops stay branch-free).  No two array arguments may overlap (compiled
     ``noalias``: :mod:`abb_gym._numba`); compiled without reference counts (same module)."""
-    n = s.shape[0]
+    n = mdl.rows_of(s, nb, spec)
     L = mdl.lanes_of(s, spec)
     k1, k2, k3, k4 = k[0], k[1], k[2], k[3]
     # constants in the arrays' precision (float64 or float32: elementary.like)
@@ -214,7 +214,7 @@ def _etdrk4_step(t, h, s, p, b, d, k, tmp, tt, work, lam, coef, active, nb, spec
     No two array arguments may overlap (compiled ``noalias``: :mod:`abb_gym._numba`);
     compiled without reference counts (same module).
     """
-    n = s.shape[0]
+    n = mdl.rows_of(s, nb, spec)
     L = mdl.lanes_of(s, spec)
     nu, na, nbb, nc = k[0], k[1], k[2], k[3]
     a = k[4]

@@ -328,6 +328,19 @@ def lanes_of(s, spec):
 
 
 @njit(cache=True, inline="always")
+def rows_of(s, nb, spec):
+    """State rows of the lane-last block ``s`` of ``nb`` balls, for the step functions' loops
+    over them: under ``SPEC_ONE_LANE`` the compile-time constant 2 (3 + nb) (``nb`` a literal),
+    else ``s.shape[0]``.  With a known count of ten rows LLVM unrolls a one-lane block's row
+    loops whole; with an unknown one it vectorises them by two vectors of 8 (the interleave
+    option of :mod:`abb_gym.physics.elementary`), which leaves all ten rows to the scalar
+    remainder: the one-lane kernel of ``simulate`` ran about 10 % slower.  On many lanes the
+    row loops stay loops (unrolled around the vectorised lane loops, the vector environment
+    measured x0.76-0.80)."""
+    return 2 * (3 + nb) if (spec & SPEC_ONE_LANE) != 0 else s.shape[0]
+
+
+@njit(cache=True, inline="always")
 def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     """One ball's terms of the equations (module docstring), from scalars only, so that the
     lane loop that calls it vectorises: (col_x, col_y, c_i, 1 / I_i, its Jt share, its Sx and
