@@ -331,8 +331,8 @@ G_INTEGRATE = batch.N_G + 1  # the row takes part in the next interval
 G_DONE = batch.N_G + 2      # the row's episode ended in this step
 # the row whose state and parameters the lane holds, as its last step left them (-1: none;
 # Buffers sets it).  Only a reset writes a row's parameters and state from outside the step
-# (episodes.commit), so a lane that held row i loads it again only for another row or at the
-# first step of an episode (st[i, S_K] == 0)
+# (episodes.commit), so a lane that held row i loads it again only for another row, at the
+# first step of an episode (st[i, S_K] == 0) or after a failed interval (G_HELD = -1)
 G_HELD = batch.N_G + 3
 N_G_ENV = batch.N_G + 4
 

@@ -162,7 +162,7 @@ class Buffers:
         self.cfg = setup.cfg
         self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV,
                                    precision=setup.config.precision)
-        self.blocks.g[:, G_HELD] = -1  # no lane holds a row's parameters yet
+        self.blocks.g[:, G_HELD] = -1  # no lane holds a row yet (kernel.G_HELD)
         self.order = np.arange(n, dtype=np.int64)
         self.n_balls = nb
         # blocks of one lane (a single environment, a few sub-environments): the kernel also

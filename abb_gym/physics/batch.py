@@ -145,14 +145,15 @@ def lane_order(step_sizes: np.ndarray, lanes: int = 1, parts: int = 1) -> np.nda
     """Rows in the order of their step size (stable), so that environments that take as many
     steps per interval share blocks and no block waits for one slow lane.
 
-    ``parts`` > 1 (the threads of the parallel loop over blocks, :func:`thread_parts`; at
-    most one run per block): the blocks of ``lanes`` rows are cut into that many contiguous
-    runs, as numba's parallel loop hands them to its threads, and each run sorts its own
-    contiguous range of rows.  Sorted as a whole, the first thread got the blocks of the smallest steps, i.e. the most substeps: at
-    1024 sub-environments of ``yoshida_odd`` 37 block-substeps per control step against the
-    second thread's 30; sorted per run, 34 and 34 (the vector environment's compiled step 3 %
-    faster, median of 14 alternating rounds in one process).  The order changes which lanes
-    share a block, never a lane's arithmetic: the results are the same bits."""
+    ``parts`` > 1 (the threads of the parallel loop over blocks, :func:`thread_parts`; at most
+    one run per block): the blocks of ``lanes`` rows are cut into that many contiguous runs, as
+    numba's parallel loop hands them to its threads, and each run sorts its own contiguous range
+    of rows.  Sorted as a whole, the first thread got the blocks of the smallest steps, i.e. the
+    most substeps: at 1024 sub-environments of ``yoshida_odd`` 37 block-substeps per control
+    step against the second thread's 30; sorted per run, 34 and 34 (the vector environment's
+    compiled step 3 % faster, median of 14 alternating rounds in one process).  The order
+    changes which lanes share a block, never a lane's arithmetic: the results are the same
+    bits."""
     step_sizes = np.asarray(step_sizes)
     n = step_sizes.shape[0]
     n_blocks = -(-n // max(int(lanes), 1))

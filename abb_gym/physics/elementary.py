@@ -253,8 +253,9 @@ def exp_bounded(y):
 
 @njit(cache=True, inline="always")
 def _tanh64(x):
-    """tanh x of a float64 without library calls: ``u / (u + 2)`` with ``u = e^(2|x|) - 1`` evaluated without
-    cancellation, so the relative error stays a few ulp down to the smallest x."""
+    """tanh x of a float64 without library calls: ``u / (u + 2)`` with ``u = e^(2|x|) - 1``
+    evaluated without cancellation, so the relative error stays a few ulp down to the smallest
+    x."""
     a = min(abs(x), 20.0)  # tanh(20) = 1 - 8e-18: 1 in double precision
     scale, p = _expm1_reduced(2.0 * a)
     u = scale * p + (scale - 1.0)

@@ -340,10 +340,10 @@ def _dopri5_attempt(t, h, s, p2, b3, d, k, tmp, work, tt, s_new, rtol, atol, nb,
 def _run(method, s0, t_out, seg_t, seg_d, p, b, h, rtol, atol, out, nb, spec):
     """Integrate from ``t_out[0]``; write the state at each ``t_out[k]`` into ``out[k]``.
 
-    ``method`` is a value of :data:`~abb_gym.physics.methods.METHOD_IDS`; ``h`` the fixed step (or the first trial step
-    of the adaptive method) [s]; ``rtol`` and ``atol`` (array) are used by the adaptive
-    method only.  ``seg_t`` are segment start times (ascending, ``seg_t[0] <= t_out[0]``) and
-    ``seg_d`` the drive rows; ``spec`` the kernel's ``SPEC_*`` bits
+    ``method`` is a value of :data:`~abb_gym.physics.methods.METHOD_IDS`; ``h`` the fixed step
+    (or the first trial step of the adaptive method) [s]; ``rtol`` and ``atol`` (array) are used
+    by the adaptive method only.  ``seg_t`` are segment start times (ascending, ``seg_t[0] <=
+    t_out[0]``) and ``seg_d`` the drive rows; ``spec`` the kernel's ``SPEC_*`` bits
     (:func:`abb_gym.physics.model.spec_of`).  Returns (status, failure time, failing index,
     work).  RK4 and ETDRK4 run the step functions of the vector environments on one lane.
     """

@@ -419,16 +419,16 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     """The equations of motion, once, for a block of lanes (one environment per lane):
     ``ds[:, l]`` = d(state)/dt of lane ``l`` at time ``t[l]``.
 
-    Arrays carry the lane last: ``s``, ``ds`` (2 (3 + nb), L), ``p`` (N_PARAMS, L), ``b``
-    (nb, N_BALL_PARAMS, L), ``d`` (N_DRIVE, L) the current drive row of each lane, ``work``
-    (nb, WORK_COLUMNS, L) scratch (the contact forces, the balls' terms).  ``spec`` (``SPEC_*`` bits) says which
-    terms exist; with ``nb`` and ``spec`` compile-time constants (literal types given by
-    :class:`~abb_gym.physics.specialise.Specialised`: one compilation per literal pair) the
-    lane loop compiles to straight-line code over all lanes at once (AVX2: four lanes per instruction,
-    with the LLVM options of :mod:`abb_gym.physics.elementary`); with run-time values it is
-    the general kernel.  Either way every lane does the same arithmetic in the same order, so
-    the results agree bit for bit.  No two array arguments may overlap (compiled ``noalias``,
-    which spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
+    Arrays carry the lane last: ``s``, ``ds`` (2 (3 + nb), L), ``p`` (N_PARAMS, L), ``b`` (nb,
+    N_BALL_PARAMS, L), ``d`` (N_DRIVE, L) the current drive row of each lane, ``work`` (nb,
+    WORK_COLUMNS, L) scratch (the contact forces, the balls' terms).  ``spec`` (``SPEC_*`` bits)
+    says which terms exist; with ``nb`` and ``spec`` compile-time constants (literal types given
+    by :class:`~abb_gym.physics.specialise.Specialised`: one compilation per literal pair) the
+    lane loop compiles to straight-line code over all lanes at once (vector instructions, with
+    the LLVM options of :mod:`abb_gym.physics.elementary`); with run-time values it is the
+    general kernel.  Either way every lane does the same arithmetic in the same order, so the
+    results agree bit for bit.  No two array arguments may overlap (compiled ``noalias``, which
+    spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
     ball; each ball's terms (generalised force, the rows of its equation) are kept in
