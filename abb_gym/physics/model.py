@@ -343,17 +343,18 @@ def rows_of(s, nb, spec):
 @njit(cache=True, inline="always")
 def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     """One ball's terms of the equations (module docstring), from scalars only, so that the
-    lane loop that calls it vectorises: (col_x, col_y, c_i, 1 / I_i, its Jt share, its Sx and
-    Cy shares, its x and y forces, its rotor torque, the generalised force Q_i and the rows
-    b_x, b_y, b_th of the ball equation ``I_i ph'' + b_x x'' + b_y y'' + b_th th'' = Q_i``).
+    lane loop that calls it vectorises: (col_x, col_y, c_i, its Jt share, its Sx and Cy
+    shares, its x and y forces, its rotor torque, the generalised force Q_i and the rows b_x,
+    b_y, b_th of the ball equation ``I_i ph'' + b_x x'' + b_y y'' + b_th th'' = Q_i``; I_i
+    itself is constant: column ``B_II``).
 
     The inputs come in tuples (a call with more than 30 arguments compiles to a star-args
-    call, which numba cannot inline): ``ball`` (m, J_i, c_i without the eccentricity, 1 / I_i
-    with any virtual mass: columns ``B_CI``, ``B_INV``, beta_i, mu_r / r), ``geometry`` (R,
-    u*, E, gam, sin(th + gam), cos(th + gam), g_x, g_y), ``extended_inputs`` (contact Q and
-    N, the drag law's coefficients, the friction law's), ``flags`` (ext, ecc, roll, grav,
-    touch, fric: compile-time constants of the specialised kernels)."""
-    m, ji, ci0, inv, beta, mur = ball
+    call, which numba cannot inline): ``ball`` (m, J_i, c_i without the eccentricity: column
+    ``B_CI``, beta_i, mu_r / r), ``geometry`` (R, u*, E, gam, sin(th + gam), cos(th + gam),
+    g_x, g_y), ``extended_inputs`` (contact Q and N, the drag law's coefficients, the
+    friction law's), ``flags`` (ext, ecc, roll, grav, touch, fric: compile-time constants of
+    the specialised kernels)."""
+    m, ji, ci0, beta, mur = ball
     big_r, ureg, e, gam, stg, ctg, gx, gy = geometry
     (qc, nc, klin, kquad, reu, dlaw, a0, a1, a2, a3, plateau, muk, mus, ufr,
      ustr) = extended_inputs
@@ -411,7 +412,7 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
             bth += kr * e * sgp
         if ext and touch:
             fi -= kr * nc / m
-    return colx, coly, ci, inv, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
+    return colx, coly, ci, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
@@ -504,10 +505,10 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         g1 = zero
         g2 = zero
         for i in range(nb):
-            colx, coly, ci, inv, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
+            colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
                 th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
-                (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_INV, l],
-                 b[i, B_BETA, l], b[i, B_MUR, l]), geometry,
+                (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_BETA, l],
+                 b[i, B_MUR, l]), geometry,
                 (work[i, W_QC, l], work[i, W_NC, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
                  b[i, B_REU, l]) + law, flags)
             sx += sxi
@@ -523,6 +524,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             work[i, W_BY, l] = by
             if motor:
                 work[i, W_BTH, l] = bth
+            inv = b[i, B_INV, l]
             d00 += colx * bx * inv
             d01 += colx * by * inv
             d10 += coly * bx * inv
