@@ -20,6 +20,7 @@ import pytest
 import yaml
 
 import abb_gym
+from abb_gym._threads import SHORT_SPIN
 from abb_gym.envs import ENV_IDS, episode_steps
 from abb_gym.evaluation import studies
 from abb_gym.evaluation.evaluate import METRICS, NONNEGATIVE, SHARES, summarise
@@ -45,14 +46,16 @@ env.reset(seed=0)
 env.step(np.zeros((2, 1), np.float32))
 print(json.dumps({"layer": numba.threading_layer(), "torch_threads": torch.get_num_threads(),
                   "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
+                  "gomp_spincount": os.environ.get("GOMP_SPINCOUNT"),
                   "adjusted": ADJUSTED}))
 """
 
 
 def _fresh_env(**extra: str) -> dict[str, str]:
-    """The environment of a fresh shell: this process set OMP_WAIT_POLICY on import."""
+    """The environment of a fresh shell: this process set OMP_WAIT_POLICY and GOMP_SPINCOUNT
+    on import."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("OMP_WAIT_POLICY", "NUMBA_THREADING_LAYER")}
+           if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT", "NUMBA_THREADING_LAYER")}
     env.update(extra)
     return env
 
@@ -75,10 +78,19 @@ def test_torch_first_gets_no_spinning_openmp_threads():
     assert got["adjusted"]["numba_threading_layer"] == "workqueue"
 
 
-def test_abb_gym_first_changes_only_the_wait_policy():
+def test_abb_gym_first_changes_only_the_wait_policy_and_its_spin():
     pytest.importorskip("torch")
     got = _probe("abb-first")
     assert got["omp_wait_policy"] == "PASSIVE"
+    assert got["gomp_spincount"] == SHORT_SPIN
+    assert got["adjusted"] == {"OMP_WAIT_POLICY": "PASSIVE", "GOMP_SPINCOUNT": SHORT_SPIN}
+
+
+def test_a_spin_count_set_by_the_user_is_kept():
+    pytest.importorskip("torch")
+    got = _probe("abb-first", GOMP_SPINCOUNT="0")
+    assert got["omp_wait_policy"] == "PASSIVE"
+    assert got["gomp_spincount"] == "0"
     assert got["adjusted"] == {"OMP_WAIT_POLICY": "PASSIVE"}
 
 
@@ -86,6 +98,7 @@ def test_a_wait_policy_set_by_the_user_is_respected():
     pytest.importorskip("torch")
     got = _probe("torch-first", OMP_WAIT_POLICY="ACTIVE")
     assert got["omp_wait_policy"] == "ACTIVE"
+    assert got["gomp_spincount"] is None
     assert got["adjusted"] == {}
     assert got["torch_threads"] != 1 or os.cpu_count() == 1
 
