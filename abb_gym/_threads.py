@@ -16,8 +16,8 @@ or the next torch call: SB3 PPO ``learn(2048)`` with 8 sub-environments took 66 
   that reaches a region's end barrier first sleeps and is woken too.  With a vector step every
   few hundred microseconds that cost the vector environment a seventh of its speed at 1024
   sub-environments (six alternating whole-process pairs, 10 000 spins against none: x1.02-1.31,
-  median 1.15), and SB3 PPO ``learn(4096)`` with 8 sub-environments took 1.04-1.06 s instead
-  of 0.62-0.66 s.  30 000 spins were no faster than 10 000 (six pairs, median 1.0).  On this
+  median 1.15), and SB3 PPO ``learn(4096)`` with 8 sub-environments took 0.99-1.15 s instead
+  of 0.51-0.66 s.  30 000 spins were no faster than 10 000 (six pairs, median 1.0).  On this
   2-core machine 10 000 spins last about 0.17 ms (the extra CPU time per step of a worker
   stepped every 5 ms), so an idle worker gives its core back after at most that.
 * an OpenMP runtime was loaded before that (typically ``import torch`` before ``import
