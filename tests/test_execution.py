@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from abb_gym._threads import available_cpus
 from abb_gym.analysis import Groups, stability_map
 from abb_gym.execution import (Executor, MissingExtraError, ResultStore, TaskFailed, run_tasks,
                                seed_int, task_id, task_seed)
@@ -24,8 +25,8 @@ from abb_gym.execution.errors import (RayConnectionError, RemoteTraceback, Sweep
                                       portable_error)
 from abb_gym.execution.store import STALE_TMP_AGE
 from abb_gym.execution.testing import (ToyTask, count_computed, count_started,
-                                       ctrl_c_after_saves, running_keys, toy_task,
-                                       toy_trainable)
+                                       ctrl_c_after_saves, parallel_threads, running_keys,
+                                       toy_task, toy_trainable)
 from abb_gym.execution.tune import (choice, expand_space, grid, loguniform, randint,
                                     run_trials, uniform)
 
@@ -50,6 +51,19 @@ def test_serial_and_processes_give_identical_results():
     assert run_tasks(toy_task, tasks, workers=2, progress=False) == \
         run_tasks(toy_task, tasks, workers=1, progress=False)
     assert run_tasks(toy_task, [], workers=2, progress=False) == []
+
+
+def test_each_worker_runs_its_share_of_the_cores():
+    """Worker processes split the CPUs between them (abb_gym._threads.share_cores): on a
+    2-core machine two workers run numba's parallel loops on one thread each, not two (each
+    worker's idle thread would spin against the other worker)."""
+    import numba
+    share = max(1, min(available_cpus() // 2, numba.config.NUMBA_NUM_THREADS))
+    assert set(run_tasks(parallel_threads, list(range(4)), workers=2, progress=False)) == {share}
+    if available_cpus() >= 2 and numba.config.NUMBA_NUM_THREADS >= 2:
+        assert share < numba.config.NUMBA_NUM_THREADS  # the test can tell the share apart
+    assert run_tasks(parallel_threads, [0], workers=1, progress=False) == \
+        [numba.get_num_threads()]  # in this process: unchanged
 
 
 def test_stability_map_identical_on_executor_and_workers():

@@ -19,8 +19,8 @@ from abb_gym.execution import (Executor, ResultStore, TaskFailed, run_tasks,  # 
 from abb_gym.execution import ray_backend  # noqa: E402
 from abb_gym.execution.errors import RemoteTraceback, SweepInterrupted  # noqa: E402
 from abb_gym.execution.testing import (ToyTask, count_computed, count_started,  # noqa: E402
-                                       ctrl_c_after_saves, running_keys, toy_task,
-                                       toy_trainable)
+                                       ctrl_c_after_saves, parallel_threads, running_keys,
+                                       toy_task, toy_trainable)
 from abb_gym.execution.tune import grid, loguniform, run_trials  # noqa: E402
 
 N = 24
@@ -50,6 +50,16 @@ def test_same_sweep_identical_locally_and_on_ray():
     assert run_tasks(toy_task, tasks, ray=True, seed=7, progress=False) == local
     assert run_tasks(toy_task, tasks, ray=True, seed=7, chunksize=5, workers=1,
                      progress=False) == local
+
+
+def test_ray_tasks_run_on_their_cpus():
+    """A Ray task's parallel loops use the task's CPUs (one by default, two when asked),
+    not every core of the node (abb_gym._threads.share_cores)."""
+    assert set(run_tasks(parallel_threads, list(range(4)), ray=True, progress=False)) == {1}
+    import numba
+    if numba.config.NUMBA_NUM_THREADS >= 2:
+        assert set(run_tasks(parallel_threads, [0, 1], ray=True, ray_options={"num_cpus": 2},
+                             progress=False)) == {2}
 
 
 def test_stability_map_identical_locally_and_on_ray():

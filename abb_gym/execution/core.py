@@ -10,6 +10,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from .._threads import available_cpus
 from .errors import SweepInterrupted, TaskFailed
 from .ids import function_name, task_id, task_seed
 from .store import ResultStore
@@ -21,10 +22,7 @@ _MAX_AUTO_CHUNK = 32
 
 def default_workers() -> int:
     """Local worker processes when none are asked for: the CPUs this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # not Linux
-        return max(1, os.cpu_count() or 1)
+    return available_cpus()
 
 
 def _positive_int(name: str, value: Any, minimum: int) -> int:

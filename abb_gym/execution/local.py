@@ -35,6 +35,7 @@ import traceback
 from multiprocessing.connection import wait
 from typing import Any, Callable, Iterable
 
+from .._threads import available_cpus, share_cores
 from .errors import INPUT_ERRORS, RemoteTraceback, call_task, portable_error
 
 __all__ = ["run_serial", "run_processes"]
@@ -93,10 +94,11 @@ class WorkerStartError(RuntimeError):
     """A worker process could not load the task function (not a task failure: no retry)."""
 
 
-def _worker_main(conn, fn_bytes: bytes) -> None:
+def _worker_main(conn, fn_bytes: bytes, threads: int) -> None:
     # The parent handles Ctrl-C and stops the workers; a worker that also raised
     # KeyboardInterrupt would only print a second traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    share_cores(threads)  # the workers share the cores (abb_gym._threads.share_cores)
     try:
         fn = pickle.loads(fn_bytes)
     except Exception:
@@ -126,10 +128,10 @@ def _worker_main(conn, fn_bytes: bytes) -> None:
 
 
 class _Worker:
-    def __init__(self, ctx, fn_bytes: bytes) -> None:
+    def __init__(self, ctx, fn_bytes: bytes, threads: int) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
-        self.proc = ctx.Process(target=_worker_main, args=(child, fn_bytes), daemon=True,
-                                name="abb-gym-worker")
+        self.proc = ctx.Process(target=_worker_main, args=(child, fn_bytes, threads),
+                                daemon=True, name="abb-gym-worker")
         self.proc.start()
         child.close()  # so that recv() in the parent sees EOF when the worker dies
         self.running: list[Job] = []  # jobs sent and not yet answered, in order
@@ -166,6 +168,9 @@ def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: i
     ``on_fail(index, attempts, detail, error)`` must raise (``error``: the exception of an
     input error, else None).  A job whose worker died or raised is requeued at the front until
     it has failed ``retries + 1`` times; an input error stops the sweep at once.
+
+    Each worker runs its compiled parallel loops on its share of the CPUs, ``CPUs // workers``
+    threads (at least one; :func:`abb_gym._threads.share_cores`).
     """
     if context is None and "forkserver" in multiprocessing.get_all_start_methods():
         context = "forkserver"
@@ -174,6 +179,7 @@ def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: i
         # workers fork from a server that has abb_gym (numpy, numba kernels) imported already
         ctx.set_forkserver_preload(["abb_gym"])
     fn_bytes = _dump_fn(fn)
+    threads = max(1, available_cpus() // workers)
     queue: collections.deque[Job] = collections.deque(jobs)
     attempts = _Attempts(retries, on_fail)
     pool: list[_Worker] = []
@@ -182,7 +188,7 @@ def run_processes(fn: Callable, jobs: Iterable[Job], *, workers: int, retries: i
             # start workers lazily: never more than there are chunks to run
             idle = [w for w in pool if not w.running]
             while queue and not idle and len(pool) < workers:
-                pool.append(_Worker(ctx, fn_bytes))
+                pool.append(_Worker(ctx, fn_bytes, threads))
                 idle = [pool[-1]]
             for w in idle:
                 if not queue:

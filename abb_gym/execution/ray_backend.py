@@ -38,6 +38,7 @@ import time
 import traceback
 from typing import Any, Callable, Sequence
 
+from .._threads import share_cores
 from .errors import (INPUT_ERRORS, MissingExtraError, RayConnectionError, RemoteTraceback,
                      call_task, portable_error)
 
@@ -135,9 +136,13 @@ def ray_cpus(ray) -> int:
         return 1
 
 
-def _run_chunk(fn: Callable, chunk: Sequence[tuple], retries: int) -> list[tuple]:
+def _run_chunk(fn: Callable, chunk: Sequence[tuple], retries: int,
+               threads: int = 1) -> list[tuple]:
     """Runs on a Ray worker: every job of the chunk, retrying exceptions per job; an input
-    error ends the chunk (the sweep stops on it)."""
+    error ends the chunk (the sweep stops on it).  The compiled parallel loops run on the
+    task's ``threads`` CPUs (:func:`abb_gym._threads.share_cores`; numba's default would be
+    every core of the node, for each of the node's tasks)."""
+    share_cores(threads)
     out: list[tuple] = []
     for index, task, seed in chunk:
         for attempt in range(1, retries + 2):
@@ -225,8 +230,10 @@ def run_ray(fn: Callable, jobs: Sequence[tuple], *, retries: int, chunksize: int
     in_flight: dict[Any, list] = {}
     cap = {"n": max_in_flight or 4 * ray_cpus(ray), "checked": time.monotonic()}
 
+    threads = max(1, int(opts["num_cpus"]))
+
     def submit(chunk: list) -> None:
-        in_flight[remote.remote(fn_ref, chunk, retries)] = chunk
+        in_flight[remote.remote(fn_ref, chunk, retries, threads)] = chunk
 
     def refill() -> None:
         if max_in_flight is None and time.monotonic() - cap["checked"] > 5.0:

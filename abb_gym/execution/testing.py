@@ -19,12 +19,14 @@ Check a cluster from any node (Ray workers must be able to import ``abb_gym``)::
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import signal
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +36,7 @@ except ImportError:  # not POSIX: runs are counted but running_keys() sees none
     fcntl = None
 
 __all__ = ["ToyTask", "toy_task", "toy_trainable", "count_computed", "count_started",
-           "running_keys", "ctrl_c_after_saves"]
+           "running_keys", "ctrl_c_after_saves", "parallel_threads"]
 
 
 @dataclass(frozen=True)
@@ -176,3 +178,11 @@ def toy_trainable(config: dict) -> dict:
     if marker_dir:
         (Path(marker_dir) / f"computed-{seed}-{os.getpid()}-{uuid.uuid4().hex}").touch()
     return {"score": score, "lr": lr, "seed": seed}
+
+
+def parallel_threads(task: Any = None, seed: Any = None) -> int:
+    """The threads numba's parallel loops use in the process that runs the task (the tests of
+    the workers' share of the cores: :func:`abb_gym._threads.share_cores`)."""
+    # imported by name: an import statement would put this module into the kernel-cache
+    # fingerprint (abb_gym._jit_cache), and an edit of it would rebuild every kernel
+    return importlib.import_module("numba").get_num_threads()
