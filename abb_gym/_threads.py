@@ -118,8 +118,9 @@ def share_cores(threads: int) -> int:
     cores, ``abb-gym evaluate --scene yoshida_odd --policy baseline:knots --episodes 200
     --workers 2``: 3.3-4.2 s without the spin, 4.5-5.4 s with it and two threads per worker;
     with it and this share, 3.4-3.9 s against 3.4-3.6 s for the tree before the spin (four
-    alternating pairs).  Never more than numba's pool (``NUMBA_NUM_THREADS``, default all cores), which
-    stays as it is: a Ray worker process runs tasks of different CPU counts in turn."""
+    alternating pairs).  Never more than numba's pool (``NUMBA_NUM_THREADS``, default all
+    cores), which stays as it is: a Ray worker process runs tasks of different CPU counts in
+    turn."""
     # imported by name, like numba's config above (the kernel-cache fingerprint)
     numba = importlib.import_module("numba")
     n = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
