@@ -32,7 +32,7 @@ from .layout import S_J, S_NSEG
 
 __all__ = ["ActionModel", "ACTION_MODELS", "KIND_TORQUE", "KIND_SPEED", "KIND_DWELL",
            "write_interval_row", "whole_episode", "dwell_profile", "dwell_action",
-           "action_model", "as_action_array", "checked_action"]
+           "action_model", "checked_action"]
 
 KIND_TORQUE = 0
 KIND_SPEED = 1
@@ -66,11 +66,6 @@ def write_interval_row(kind, d, a, t0, th, w, dt, operating_speed, max_accelerat
 
 
 # --------------------------------------------------------------------------- Python side
-def as_action_array(action: Any, shape: tuple[int, ...], what: str = "action") -> np.ndarray:
-    """``action`` as a float64 array of exactly ``shape`` (:func:`checked_action`)."""
-    return checked_action(action, shape, what).astype(np.float64, copy=False)
-
-
 def checked_action(action: Any, shape: tuple[int, ...], what: str = "action") -> np.ndarray:
     """``action`` as an array of numbers of exactly ``shape``, in its own dtype (no
     reshaping, no broadcasting: a transposed batch would scramble the actions); anything else
