@@ -169,7 +169,8 @@ class AgentSetting:
     def __init__(self, agent: str, preset: str | None):
         from abb_gym.rl.agent import resolve_agent_path
         from abb_gym.rl.agent_files import check_folder
-        from abb_gym.rl.config import eval_env_kwargs, load_config
+        from abb_gym.rl.config import load_config
+        from abb_gym.rl.env_factory import eval_env_kwargs
         self.folder = resolve_agent_path(agent)
         files = check_folder(self.folder)
         self.env_id, self.scene = files.env_id, files.manifest["scene"]
