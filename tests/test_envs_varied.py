@@ -15,7 +15,7 @@ from abb_gym.envs import episodes
 from abb_gym.envs.layout import S_AOP, S_AREF, S_XS, S_YS
 from abb_gym.physics import rotor
 from abb_gym.physics.scene import load_scene
-from abb_gym.physics.simulate import default_step
+from abb_gym.physics.steps import default_step
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 SCENES = ("yoshida_odd", "spannan_cfrp")

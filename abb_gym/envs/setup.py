@@ -22,7 +22,7 @@ from ..physics.methods import METHOD_IDS
 from ..physics import model as mdl
 from ..physics import rotor
 from ..physics.scene import Scene, load_scene
-from ..physics.simulate import state_names
+from ..physics.trajectory import state_names
 from ..physics.specialise import resolve_kernel
 from . import episodes
 from .actions import ActionModel, action_model
