@@ -18,7 +18,7 @@ from abb_gym.physics import variants
 from abb_gym.envs.layout import S_AOP, S_AREF, S_XS, S_YS
 from abb_gym.physics import rotor
 from abb_gym.physics.scene import load_scene
-from abb_gym.physics.simulate import default_step
+from abb_gym.physics.steps import default_step
 
 # the ids that run on any scene (SpinRedistribute needs a washer: tests/test_spin.py)
 ENV_IDS = tuple(t.env_id for t in TASKS.values() if not t.settings)

@@ -14,7 +14,7 @@ from abb_gym.envs.layout import S_AOP, S_AREF
 from abb_gym.physics import model as mdl
 from abb_gym.physics import rotor
 from abb_gym.physics import variants
-from abb_gym.physics.simulate import default_step, stiff_rates
+from abb_gym.physics.steps import default_step, stiff_rates
 
 
 def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():

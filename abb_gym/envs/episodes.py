@@ -33,7 +33,7 @@ sin/cos, accurate to ``|x| <= 1.6e6`` rad (:mod:`abb_gym.physics.elementary`), n
 huge one.  Angles already in [-pi, pi] (every shipped scene and preset) are left as they are.
 
 **Stiff episodes.**  Under RK4 an episode's step is bounded by its stiff rate (the ball drag
-and rolling resistance, :func:`abb_gym.physics.simulate.default_step`).  An episode whose
+and rolling resistance, :func:`abb_gym.physics.steps.default_step`).  An episode whose
 stiff rate forces a step more than :data:`MAX_STIFFNESS` times shorter than the step its
 rotation needs (``ball_drag_scale=1e6`` on yoshida_odd: a 2e-9 s step, 5 million RK4 steps and
 seconds of work per control interval) is refused with a ValueError that says what to use
@@ -57,7 +57,7 @@ from ..physics import drive_law as dl
 from ..physics import model as mdl
 from ..physics import runup, sensors, variants
 from ..physics.scene import Scene
-from ..physics.simulate import default_step, stiff_rates
+from ..physics.steps import default_step, stiff_rates
 from . import redistribution
 from .config import PresetError
 from .episode_parameters import BY_NAME, PARAMETERS, RESET_OPTIONS

@@ -22,7 +22,7 @@ from ..physics import model as mdl
 from ..physics import rotor
 from ..physics.methods import METHOD_IDS
 from ..physics.scene import Scene, load_scene
-from ..physics.simulate import state_names
+from ..physics.trajectory import state_names
 from . import episodes, observation, redistribution, tasks
 from .actions import ActionModel, action_model
 from .checks import check_flag
