@@ -39,7 +39,8 @@ class Task:
     own episode length, which depends on the scene and preset).  ``open_loop``: the open-loop
     speed-profile baselines (``baseline:*``, the tuner, ``replay:``) drive it; ``baselines_on``:
     the id a baseline runs on when this task's action cannot express it (None: this one).
-    ``one_step``: an episode is one step (one action decides the whole run)."""
+    ``one_step``: an episode is one step (one action decides the whole run).
+    ``test_preset``: the held-out preset a trained agent is evaluated on."""
 
     env_id: str
     action: str
@@ -53,6 +54,7 @@ class Task:
     open_loop: bool = True
     baselines_on: str | None = None
     one_step: bool = False
+    test_preset: str = "test"
 
     @property
     def name(self) -> str:
@@ -181,7 +183,8 @@ SPIN_REDISTRIBUTE = register(Task(
     "abb_gym/SpinRedistribute-v0", "speed", "spin a washer whose laundry redistributes when "
     "the drum tumbles", single_class="abb_gym.envs.spin:SpinRedistributeEnv",
     vector_class="abb_gym.envs.spin:SpinRedistributeVectorEnv", default_scene="washer",
-    default_preset="laundry", settings={"redistribution": {"enabled": True}}))
+    default_preset="laundry", test_preset="laundry_test",
+    settings={"redistribution": {"enabled": True}}))
 
 #: the id that tools default to
 DEFAULT_ENV_ID = RUN_UP_SPEED.env_id

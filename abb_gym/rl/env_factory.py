@@ -20,14 +20,18 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import gymnasium as gym
 
+from ..envs import tasks
+from ..envs.observation import LAYOUT_FIELDS
+
 if TYPE_CHECKING:
     from .config import TrainConfig
 
 __all__ = ["OBSERVATION_FIELDS", "POLICY_FIELDS", "eval_env_kwargs", "observation_kwargs",
            "policy_env_fields", "policy_env_mismatch", "make_native_env", "make_sb3_env"]
 
-#: preset fields that shape the observation (the environment must use the agent's values)
-OBSERVATION_FIELDS = ("sync_vibration", "frame_stack", "observe_time")
+#: preset fields that shape the observation (the environment must use the agent's values): the
+#: observation's declaration names them (:data:`abb_gym.envs.observation.LAYOUT_FIELDS`)
+OBSERVATION_FIELDS = LAYOUT_FIELDS
 #: preset fields that change the observation or the meaning of an action; a policy needs the
 #: same values in evaluation (``control_interval``: the same or an integer fraction of it)
 POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
@@ -37,7 +41,9 @@ POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
 def eval_env_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     """Keywords of the held-out evaluation environment (see the module docstring)."""
     env = cfg.env_kwargs
-    out: dict[str, Any] = {"scene": env.get("scene", "yoshida_odd"), "preset": "test"}
+    task = tasks.get(cfg.env_id)
+    out: dict[str, Any] = {"scene": env.get("scene", task.default_scene),
+                           "preset": task.test_preset}
     if "observe_balls" in env:
         out["observe_balls"] = env["observe_balls"]
     for key in POLICY_FIELDS:
