@@ -15,7 +15,8 @@ a baseline family over its parameters.  Baseline parameters come from the family
 (Yoshida's scaling rule), from ``baselines/<scene>.yaml`` on the search path of
 :mod:`abb_gym.resources` (the tuner's result; a user folder first, then the shipped
 ``configs/baselines``) when it exists, or explicitly.  ``baseline:NAME`` policy strings
-resolve through :func:`load_baseline` (registered as an ``abb_gym.policies`` entry point).
+resolve through :func:`abb_gym.baselines.loader.load_baseline` (registered as an
+``abb_gym.policies`` entry point).
 """
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ from ..physics.scene import Scene
 from .families import FAMILY_NAMES, build_family
 
 __all__ = ["BaselinePolicy", "ClosedLoopPolicy", "SpeedReferencePolicy", "tuned_parameters",
-           "tuned_file", "oracle_starts", "make_baseline", "load_baseline", "dwell_action",
+           "tuned_file", "oracle_starts", "make_baseline", "dwell_action",
            "FAMILY_NAMES"]
 
 
@@ -252,16 +253,3 @@ class _LazyBaseline:
 
     def act(self, obs, info):
         return self._inner.act(obs, info)
-
-
-def load_baseline(name: str, env_id: str | None = None, scene: Any = None, **_: Any):
-    """The policy of ``baseline:NAME`` (the ``abb_gym.policies`` entry point): a family
-    (:data:`FAMILY_NAMES`, tuned parameters where there are) or ``laundry_oracle``
-    (:mod:`abb_gym.baselines.laundry`)."""
-    from .laundry import ORACLE_NAME, LaundryOracle
-    if name == ORACLE_NAME:
-        return LaundryOracle()
-    if name not in FAMILY_NAMES:
-        raise ValueError(f"unknown baseline {name!r}; available: "
-                         f"{', '.join((*FAMILY_NAMES, ORACLE_NAME))}")
-    return _LazyBaseline(name, scene)

@@ -14,16 +14,13 @@ imported when one is made.
 """
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import gymnasium as gym
 
-from .display import SINGLE_METADATA
 
-__all__ = ["Task", "TASKS", "register", "get", "task_ids", "DEFAULT_ENV_ID", "env_class",
-           "vector_class", "make_single", "make_vector"]
+__all__ = ["Task", "TASKS", "register", "get", "task_ids", "DEFAULT_ENV_ID"]
 
 
 @dataclass(frozen=True)
@@ -64,82 +61,17 @@ class Task:
 
 #: every registered task, by id, in registration order
 TASKS: dict[str, Task] = {}
-
-
-def _load(path: str) -> Any:
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-def env_class(task: Task) -> type:
-    """The single environment class of ``task``."""
-    if task.single_class is not None:
-        return _load(task.single_class)
-    from .base import BalancerEnv
-    return BalancerEnv
-
-
-def vector_class(task: Task) -> type:
-    """The native vector environment class of ``task``."""
-    if task.vector_class is not None:
-        return _load(task.vector_class)
-    from .vector import BalancerVectorEnv
-    return BalancerVectorEnv
-
-
-def _own_limit(env: Any) -> gym.Env:
-    """``env`` inside a ``TimeLimit`` of its own episode length [control intervals]."""
-    setup = env.setup
-    steps = setup.max_steps if setup.backstop <= 0 else min(setup.max_steps, setup.backstop)
-    return gym.wrappers.TimeLimit(env, max_episode_steps=int(steps))
-
-
-def make_single(env_id: str, **kwargs: Any) -> gym.Env:
-    """The single environment of ``env_id`` made with ``kwargs``: inside a ``TimeLimit`` of
-    its own episode length unless the task registers a ``max_episode_steps``
-    (:mod:`abb_gym.envs`)."""
-    task = get(env_id)
-    env = env_class(task)(task=env_id, **kwargs)
-    return env if task.registered_steps is not None else _own_limit(env)
-
-
-def make_vector(env_id: str, **kwargs: Any):
-    """The native vector environment of ``env_id`` made with ``kwargs``."""
-    return vector_class(get(env_id))(task=env_id, **kwargs)
-
-
-# gym.register takes entry points as "module:attribute" text (an id's spec stays
-# JSON-serialisable and picklable), so each registered task gets two attributes of this
-# module, made on demand by its __getattr__: make_<Name> and make_<Name>_vector
-def _maker(name: str):
-    for task in TASKS.values():
-        if name == f"make_{task.name}":
-            def single(**kwargs: Any) -> gym.Env:
-                return make_single(task.env_id, **kwargs)
-            single.metadata = SINGLE_METADATA  # gym.make checks render_mode against it
-            single.__doc__ = f"Entry point of ``{task.env_id}`` (:func:`make_single`)."
-            return single
-        if name == f"make_{task.name}_vector":
-            def vector(**kwargs: Any):
-                return make_vector(task.env_id, **kwargs)
-            vector.__doc__ = f"Vector entry point of ``{task.env_id}`` (:func:`make_vector`)."
-            return vector
-    return None
-
-
-def __getattr__(name: str) -> Any:
-    maker = _maker(name) if name.startswith("make_") else None
-    if maker is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return maker
+#: the module of the entry points (:mod:`abb_gym.envs.entry`: it builds the environments,
+#: this module only declares them)
+ENTRY = "abb_gym.envs.entry"
 
 
 def register(task: Task) -> Task:
     """Add ``task`` to :data:`TASKS` and register its id with gymnasium (once)."""
     TASKS[task.env_id] = task
     if task.env_id not in gym.registry:
-        gym.register(id=task.env_id, entry_point=f"{__name__}:make_{task.name}",
-                     vector_entry_point=f"{__name__}:make_{task.name}_vector",
+        gym.register(id=task.env_id, entry_point=f"{ENTRY}:make_{task.name}",
+                     vector_entry_point=f"{ENTRY}:make_{task.name}_vector",
                      max_episode_steps=task.registered_steps)
     return task
 

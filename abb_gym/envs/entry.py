@@ -1,0 +1,85 @@
+"""The entry points of the registered ids: ``gym.make`` and ``gym.make_vec`` call these.
+
+:mod:`abb_gym.envs.tasks` declares each task; this module builds its environments: the
+task's own classes where it names them, else the generic :class:`~abb_gym.envs.base.
+BalancerEnv` and :class:`~abb_gym.envs.vector.BalancerVectorEnv` bound to the task.
+``gym.register`` takes entry points as ``"module:attribute"`` text (an id's spec stays
+JSON-serialisable and picklable), so each registered task has two attributes here, made on
+demand: ``make_<Name>`` and ``make_<Name>_vector``.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import gymnasium as gym
+
+from .display import SINGLE_METADATA
+from .tasks import TASKS, Task, get
+
+__all__ = ["env_class", "vector_class", "make_single", "make_vector"]
+
+
+def _load(path: str) -> Any:
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def env_class(task: Task) -> type:
+    """The single environment class of ``task``."""
+    if task.single_class is not None:
+        return _load(task.single_class)
+    from .base import BalancerEnv
+    return BalancerEnv
+
+
+def vector_class(task: Task) -> type:
+    """The native vector environment class of ``task``."""
+    if task.vector_class is not None:
+        return _load(task.vector_class)
+    from .vector import BalancerVectorEnv
+    return BalancerVectorEnv
+
+
+def _own_limit(env: Any) -> gym.Env:
+    """``env`` inside a ``TimeLimit`` of its own episode length [control intervals]."""
+    setup = env.setup
+    steps = setup.max_steps if setup.backstop <= 0 else min(setup.max_steps, setup.backstop)
+    return gym.wrappers.TimeLimit(env, max_episode_steps=int(steps))
+
+
+def make_single(env_id: str, **kwargs: Any) -> gym.Env:
+    """The single environment of ``env_id`` made with ``kwargs``: inside a ``TimeLimit`` of
+    its own episode length unless the task registers a ``max_episode_steps``
+    (:mod:`abb_gym.envs`)."""
+    task = get(env_id)
+    env = env_class(task)(task=env_id, **kwargs)
+    return env if task.registered_steps is not None else _own_limit(env)
+
+
+def make_vector(env_id: str, **kwargs: Any):
+    """The native vector environment of ``env_id`` made with ``kwargs``."""
+    return vector_class(get(env_id))(task=env_id, **kwargs)
+
+
+def _maker(name: str):
+    for task in TASKS.values():
+        if name == f"make_{task.name}":
+            def single(**kwargs: Any) -> gym.Env:
+                return make_single(task.env_id, **kwargs)
+            single.metadata = SINGLE_METADATA  # gym.make checks render_mode against it
+            single.__doc__ = f"Entry point of ``{task.env_id}`` (:func:`make_single`)."
+            return single
+        if name == f"make_{task.name}_vector":
+            def vector(**kwargs: Any):
+                return make_vector(task.env_id, **kwargs)
+            vector.__doc__ = f"Vector entry point of ``{task.env_id}`` (:func:`make_vector`)."
+            return vector
+    return None
+
+
+def __getattr__(name: str) -> Any:
+    maker = _maker(name) if name.startswith("make_") else None
+    if maker is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return maker
