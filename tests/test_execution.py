@@ -125,8 +125,8 @@ def test_store_is_atomic_and_ignores_unreadable_files(tmp_path):
     st.save(tid, {"v": 1})
     assert st.load(tid) == (True, {"v": 1}) and list(st.ids()) == [tid]
     assert not list((tmp_path / "s").glob(".*.tmp"))              # no temporary file left
-    (tmp_path / "s" / f"{tid}.pkl").write_bytes(b"\x80\x04truncated")
-    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tid}.pkl"):
+    (tmp_path / "s" / f"{tid}.npz").write_bytes(b"PK\x03\x04truncated")
+    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tid}.npz"):
         assert st.load(tid) == (False, None)                      # recomputed, not an error
     with pytest.raises(ValueError, match="task id"):
         st.save("../evil", 1)
@@ -145,24 +145,25 @@ def test_damaged_store_is_named_or_healed(tmp_path):
     tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path)) for i in range(6)]
     ids, store = _ids(tasks), tmp_path / "store"
     run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
-    tampered = store / f"{ids[2]}.pkl"
+    tampered = store / f"{ids[2]}.npz"
     tampered.write_text("Every result in this store is wrong\n")
     with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tampered.name}"):
         out = run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
     assert out == _expected(6) and count_computed(tmp_path)[2] == 2
     assert ResultStore(store).load(ids[2]) == (True, out[2])     # healed
 
-    (store / f"{ids[4]}.pkl").unlink()
-    (store / f"{ids[4]}.pkl").mkdir()
-    with pytest.raises(ValueError, match=f"{ids[4]}.pkl' is a directory"):
+    (store / f"{ids[4]}.npz").unlink()
+    (store / f"{ids[4]}.npz").mkdir()
+    with pytest.raises(ValueError, match=f"{ids[4]}.npz' is a directory"):
         run_tasks(toy_task, tasks, workers=2, seed=7, store=store, progress=False)
     assert count_started(tmp_path)[4] == 1                       # failed before running
     assert ids[4] not in set(ResultStore(store).ids())
-    (store / f"{ids[4]}.pkl").rmdir()
+    (store / f"{ids[4]}.npz").rmdir()
 
     # leftovers of a run killed mid-write: full records, but not results
-    (store / f"{ids[4]}.pkl").unlink(missing_ok=True)
-    record = pickle.dumps({"format": 1, "task_id": ids[4], "result": -1.0})
+    (store / f"{ids[4]}.npz").unlink(missing_ok=True)
+    ResultStore(tmp_path / "other").save(ids[4], -1.0, "abb_gym.execution.testing:toy_task")
+    record = (tmp_path / "other" / f"{ids[4]}.npz").read_bytes()
     stale, fresh = store / f".{ids[4]}.old.tmp", store / f".{ids[4]}.new.tmp"
     stale.write_bytes(record)
     fresh.write_bytes(record)

@@ -81,7 +81,7 @@ def resolve_agent_path(path: str | Path) -> Path:
     if p.is_dir() and (p / "config.yml").exists():  # an agent folder without its manifest
         raise AgentError(f"agent folder {str(p)!r} has no agent.yml (the record of its files "
                          f"and of what the agent is)")
-    raise ValueError(f"no agent at {str(path)!r}: expected an agent folder (agent.yml, "
+    raise ValueError(f"no PPO agent at {str(path)!r}: expected an agent folder (agent.yml, "
                      f"policy.safetensors), a model.zip or rl_zoo3 run folder (pickles: "
                      f"--trust-pickle), or an agent name, one of {resources.names('agents')}")
 

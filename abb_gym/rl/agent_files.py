@@ -206,8 +206,13 @@ def require_trust(source: Path, pickles: Sequence[Path], trust: bool | None = No
                             f"any code they contain when loaded; if you trust them, convert "
                             f"them once to the safe format with `{how}`, or load them as they "
                             f"are with --trust-pickle (or {TRUST_ENV}=1)")
-    warnings.warn(f"loading pickled agent files, trusted explicitly (they can run code): "
-                  f"{names}", TrustedPickleWarning, stacklevel=3)
+    if names not in _WARNED:  # once per process and files (loaders run once per task)
+        _WARNED.add(names)
+        warnings.warn(f"loading pickled agent files, trusted explicitly (they can run code): "
+                      f"{names}", TrustedPickleWarning, stacklevel=3)
+
+
+_WARNED: set[str] = set()
 
 
 # ------------------------------------------------------------------------ config.yml

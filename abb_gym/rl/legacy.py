@@ -275,14 +275,15 @@ def _environment(env_id: str, env_kwargs: Mapping[str, Any]) -> tuple[dict, list
 
 
 def load_pickled(agent: PickledAgent, trust: bool | None = None, env_id: str | None = None,
-                 env_kwargs: Mapping[str, Any] | None = None, best: bool = False
-                 ) -> LoadedPickles:
+                 env_kwargs: Mapping[str, Any] | None = None, best: bool = False,
+                 with_best: bool = False) -> LoadedPickles:
     """Read a pickled agent, if trusted (:func:`~abb_gym.rl.agent_files.require_trust`;
     :class:`~abb_gym.rl.agent_files.PickleRefused` otherwise).  ``env_id`` and
     ``env_kwargs`` describe the environment of a plain SB3 model (which records neither);
-    for the other kinds ``env_id``, when given, must be the agent's."""
+    for the other kinds ``env_id``, when given, must be the agent's.  ``with_best``: an
+    abb-gym folder's best model too (``best_model``), to convert it."""
     if agent.kind == "abb-gym":
-        return _load_abb_gym(agent, trust, env_id, best)
+        return _load_abb_gym(agent, trust, env_id, best, with_best)
     require_trust(agent.source, agent.pickles, trust)
     if agent.kind == "rl_zoo3":
         if env_id is not None and env_id != agent.env_id:
@@ -325,7 +326,7 @@ def load_pickled(agent: PickledAgent, trust: bool | None = None, env_id: str | N
 
 
 def _load_abb_gym(agent: PickledAgent, trust: bool | None, env_id: str | None,
-                  best: bool) -> LoadedPickles:
+                  best: bool, with_best: bool) -> LoadedPickles:
     folder = agent.source
     if agent.manifest is not None:
         files = check_folder(folder, best=best)  # the fingerprints, before any unpickling
@@ -341,8 +342,9 @@ def _load_abb_gym(agent: PickledAgent, trust: bool | None, env_id: str | None,
         raise ValueError(f"agent {str(folder)!r} was trained on {run['env_id']}, not {env_id}")
     from .agent_files import entry_algorithm
     algo = entry_algorithm(entry, config)
-    pickles = [p for p in (folder / "model.zip", folder / "vecnormalize.pkl",
-                           folder / "best_model.zip", folder / "best_vecnormalize.pkl")
+    prefixes = ["best_"] if best else [""] + (["best_"] if with_best else [])
+    pickles = [p for prefix in prefixes
+               for p in (folder / f"{prefix}model.zip", folder / f"{prefix}vecnormalize.pkl")
                if p.is_file()]
     require_trust(folder, pickles, trust)
     if names is None:
@@ -364,7 +366,7 @@ def _load_abb_gym(agent: PickledAgent, trust: bool | None, env_id: str | None,
 
     model, vn = pair("best_" if best else "")
     best_model = best_vn = None
-    if not best and (folder / "best_model.zip").is_file():
+    if with_best and not best and (folder / "best_model.zip").is_file():
         best_model, best_vn = pair("best_")
     weights = evaluation_reward_weights(run["env_id"], run, folder / "config.yml")
     return LoadedPickles(model, vn, run["env_id"], algo, run, entry, config, names, weights,
@@ -396,7 +398,7 @@ def convert_agent(source: str | Path, out: str | Path | None = None, *,
                          f"model.zip, an rl_zoo3 run folder or an SB3 model.zip)")
     if algo is not None:
         agent.algo = algo
-    loaded = load_pickled(agent, trust, env_id, env_kwargs)
+    loaded = load_pickled(agent, trust, env_id, env_kwargs, with_best=True)
     target = Path(out) if out is not None else None
     if target is None:
         if agent.kind != "abb-gym":
