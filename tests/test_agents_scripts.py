@@ -191,7 +191,7 @@ def test_a_gap_table_names_the_environments_only_when_they_differ(script):
 def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):
     from abb_gym.plots import plot_training_curves
     from abb_gym.rl import trained_dir
-    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "model.zip").exists())
+    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "agent.yml").exists())
     readme = tmp_path / "agents" / "README.md"
     readme.parent.mkdir()
     text = script.training_section(agents, tmp_path / "agents" / "results", readme)
