@@ -6,6 +6,10 @@ interrupts half-way must not replace a good one with half of a new one, and a re
 second command, a resumed sweep) must see either the old file or the new one.  A failed
 write leaves the old file as it was and removes its temporary file.
 
+A set of files that belong together (the files of one report) is written with
+:func:`replacing_together`: every file to its temporary name first, then all renamed at the
+end, so that a failure half-way leaves the previous set as it was, not half of each.
+
 Temporary files are named ``.<name>.<random>.part<suffix>`` (the suffix kept so that
 matplotlib and imageio pick the format from it); they get the permissions an ordinary
 ``open(path, "w")`` would give (``0o666`` less the umask), not ``mkstemp``'s ``0o600``.
@@ -18,7 +22,8 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterator
 
-__all__ = ["replacing_path", "replacing", "write_text", "write_bytes", "savefig"]
+__all__ = ["replacing_path", "replacing", "replacing_together", "write_text", "write_bytes",
+           "savefig"]
 
 
 def _umask() -> int:
@@ -45,6 +50,41 @@ def replacing_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        raise
+
+
+class _Together:
+    """The temporary paths of :func:`replacing_together` and their targets."""
+
+    def __init__(self) -> None:
+        self.pending: list[tuple[Path, Path]] = []
+
+    def path(self, target: str | os.PathLike) -> Path:
+        """A temporary path to write ``target``'s content to (renamed at the end)."""
+        target = Path(target)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".part{target.suffix}",
+                                   dir=target.parent)
+        os.close(fd)
+        self.pending.append((Path(tmp), target))
+        return Path(tmp)
+
+
+@contextlib.contextmanager
+def replacing_together() -> Iterator[_Together]:
+    """Yield an object whose ``path(target)`` gives a temporary path for each file of a set;
+    when the block ends without an exception every file is renamed into place, otherwise
+    every temporary file is removed and the targets stay as they were."""
+    batch = _Together()
+    try:
+        yield batch
+        for tmp, _ in batch.pending:
+            os.chmod(tmp, _MODE)
+        for tmp, target in batch.pending:
+            os.replace(tmp, target)
+    except BaseException:
+        for tmp, _ in batch.pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         raise
 
 

@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .._files import replacing, savefig, write_text
+from .._files import replacing_together, savefig
 from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
 from .replay import feedback_value, paired_by_episode
@@ -140,26 +140,32 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         text += ("\nFeedback value (paired over the same episodes; positive residual and "
                  "run-up time differences, and negative return differences, mean the policy "
                  "beats its own open-loop replay):\n\n" + feedback_table(feedback) + "\n")
-    write_text(paths["summary"], text)
     rows = [e for r in results for e in r.episodes]
-    with replacing(paths["episodes"], "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
                "seed": first.seed, "reward_weights": first.reward_weights,
                "reward_source": first.reward_source, "metrics": {k: UNITS[k] for k in METRICS},
                "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
                "feedback_value": feedback, "sweep": sweep or []}
-    write_text(paths["json"], json.dumps(payload, indent=1, default=_json_default))
     recorded = [(r.policy, r.rollouts[min(r.rollouts)]) for r in results if r.rollouts]
-    if recorded:
-        from ..plots import plot_runup_comparison
-        paths["timeseries"] = plot_runup_comparison(
-            dict(recorded), out / "timeseries.png",
-            f"{first.scene}: policies on test episode {min(results[0].rollouts)}")
-    paths["pareto"] = plot_pareto(results, sweep or [], out / "pareto.png")
+    # every file beside its target first, then all renamed: a failure half-way leaves the
+    # previous report as it was
+    with replacing_together() as files:
+        files.path(paths["summary"]).write_text(text)
+        with open(files.path(paths["episodes"]), "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        files.path(paths["json"]).write_text(json.dumps(payload, indent=1,
+                                                        default=_json_default))
+        if recorded:
+            from ..plots import plot_runup_comparison
+            paths["timeseries"] = out / "timeseries.png"
+            plot_runup_comparison(
+                dict(recorded), files.path(paths["timeseries"]),
+                f"{first.scene}: policies on test episode {min(results[0].rollouts)}")
+        paths["pareto"] = out / "pareto.png"
+        plot_pareto(results, sweep or [], files.path(paths["pareto"]))
     return paths
 
 

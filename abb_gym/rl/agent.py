@@ -66,7 +66,6 @@ def resolve_agent_path(path: str | Path) -> Path:
     name on the search path of :mod:`abb_gym.resources` (user folders first, then the shipped
     agents)."""
     from .. import resources
-    from .agent_files import AgentError
     from .legacy import find_pickled
     p = Path(path)
     if p.is_file() and p.suffix == ".zip":
@@ -79,8 +78,8 @@ def resolve_agent_path(path: str | Path) -> Path:
     if found is not None:
         return found
     if p.is_dir() and (p / "config.yml").exists():  # an agent folder without its manifest
-        raise AgentError(f"agent folder {str(p)!r} has no agent.yml (the record of its files "
-                         f"and of what the agent is)")
+        from .agent_files import check_folder
+        check_folder(p)  # the AgentError that names what is missing
     raise ValueError(f"no PPO agent at {str(path)!r}: expected an agent folder (agent.yml, "
                      f"policy.safetensors), a model.zip or rl_zoo3 run folder (pickles: "
                      f"--trust-pickle), or an agent name, one of {resources.names('agents')}")
