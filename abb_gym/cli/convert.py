@@ -44,6 +44,8 @@ def run(args) -> int:
     from .outputs import output_folder
     if not args.source.strip():
         raise ValueError(f"source must be an agent folder or a model.zip (got {args.source!r})")
+    if args.out is not None and not args.out.strip():  # not read as "in place" or as "here"
+        raise ValueError(f"--out must be a folder path (got {args.out!r})")
     agent = find_pickled(args.source)
     if agent is None:
         raise ValueError(f"{args.source!r} is not a pickled agent (an abb-gym folder with "

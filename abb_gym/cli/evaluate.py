@@ -80,8 +80,9 @@ def agent_reward_weights(specs, policies, env_kwargs: dict) -> tuple[dict, str |
 
 
 def _executor(args):
+    # "is not None": an empty --resume-dir is refused by the executor, not read as "none"
     chosen = (args.workers is not None or args.ray or args.ray_address
-              or getattr(args, "resume_dir", None))
+              or getattr(args, "resume_dir", None) is not None)
     return executor_from_args(args) if chosen else None  # default: this process, both cores
 
 
@@ -104,8 +105,8 @@ def run(args) -> int:
     policies = [check_inputs(args.env, args.scene, args.preset, args.seed, spec, **env_kwargs)
                 for spec in args.policy]
     env_kwargs, weights_from = agent_reward_weights(args.policy, policies, env_kwargs)
-    output_folder(args.out, "--out")
     ex = _executor(args)
+    output_folder(args.out, "--out")
     results = [evaluate(args.env, args.scene, spec, args.episodes, args.seed, args.preset,
                         executor=ex, **env_kwargs) for spec in args.policy]
     for r in results:

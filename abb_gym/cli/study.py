@@ -27,8 +27,8 @@ def run(args) -> int:
     # the inputs first: a bad scene is one line before any folder or task exists (the study
     # functions check their points again before they dispatch)
     load_scene(args.scene)
-    out = output_folder(args.out, "--out")
     ex = _executor(args)
+    out = output_folder(args.out, "--out")
     if args.which == "settling":
         rows = studies.settling_study(args.scene, executor=ex)
         png = studies.plot_settling_study(rows, out / "settling_period.png")

@@ -95,6 +95,7 @@ def run(args) -> int:
     # the environment every task makes, once here (preset, keywords, stiffness)
     check_inputs(args.env, args.scene, args.preset, args.seed, **env_kwargs)
     _check_episode_memory(args, env_kwargs)
+    executor = _executor(args)  # its options checked before any file or folder is made
     if args.out is not None and not args.out.strip():  # not read as "no --out"
         raise ValueError(f"--out must be a file or folder path (got {args.out!r})")
     out = None if args.dry_run else (f"baselines/{scene_name}.yaml" if args.out is None
@@ -107,7 +108,7 @@ def run(args) -> int:
     families = tuple(args.family or FAMILIES)
     start = _tuned_starts(scene_name, families) if args.from_tuned else None
     result = tune(args.scene, families, args.budget, args.episodes,
-                  args.seed, args.preset, _executor(args), out=out, force=args.force,
+                  args.seed, args.preset, executor, out=out, force=args.force,
                   popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs,
                   restarts=args.restarts, start=start)
     print(yaml.safe_dump(result, sort_keys=False))
