@@ -405,6 +405,23 @@ def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
     assert len(err_lines) == 1 and "no Ray cluster found at 'auto'" in err_lines[0]
 
 
+def test_no_progress_bar_before_the_ray_backend_is_up(monkeypatch, capsys, tmp_path):
+    """``stability-map --ray-address auto`` without a cluster: its one error line, and no
+    progress bar drawn before it (the bar starts once the backend is connected)."""
+    ray = pytest.importorskip("ray")
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)   # as in a fresh process
+    with socket.socket() as s:                                  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")      # where "auto" then looks
+    from abb_gym.cli import main
+    assert main(["stability-map", "--nx", "2", "--ny", "2", "--ray-address", "auto",
+                 "--out", str(tmp_path / "map")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "stability map" not in err and "%" not in err, err
+    assert err.startswith("abb-gym stability-map: error: no Ray cluster found at 'auto'")
+
+
 def test_cli_stability_map_resume_dir(tmp_path):
     from abb_gym.cli import main
     argv = ["stability-map", "--x", "zeta", "--x-range", "0.05", "0.2", "--nx", "2",
