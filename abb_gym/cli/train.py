@@ -5,8 +5,9 @@
     abb-gym train --config runs/x/config.yml --hyperparams learning_rate=1e-4 \\
         --env-kwargs 'reward={residual: 5}' --out runs/x_lr1e-4
 
-Each run writes a folder (default ``runs/<config>/s<seed>-<time>``) with ``model.zip``,
-``vecnormalize.pkl``, ``config.yml``, the test-set evaluations and checkpoints, and prints its
+Each run writes a folder (default ``runs/<config>/s<seed>-<time>``) with
+``policy.safetensors``, ``vecnormalize.json``, ``config.yml``, ``agent.yml``, the test-set
+evaluations and checkpoints (data only: no pickle, :mod:`abb_gym.rl.agent_files`), and prints its
 wall time and env-steps/s (see :mod:`abb_gym.rl.train`).  Needs the training extra
 (``pip install -c constraints.txt 'abb-gym[train]'``); the options are defined here so that
 ``abb-gym --help`` works without it.
