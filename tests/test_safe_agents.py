@@ -177,6 +177,22 @@ def test_a_pickle_planted_in_the_statistics_runs_nowhere(tmp_path, capsys, monke
     assert not marker.exists()
 
 
+def test_the_agents_evaluation_script_runs_no_planted_pickle(tmp_path, capsys, monkeypatch):
+    """``agents/evaluate.py DIR`` reads agents through the same loader."""
+    import importlib.util
+    monkeypatch.delenv("ABB_GYM_TRUST_PICKLE", raising=False)
+    folder, marker = pickled_copy(tmp_path), tmp_path / "created_by_the_payload"
+    plant_in_statistics(folder, marker)
+    plant_in_model(folder, marker)
+    spec = importlib.util.spec_from_file_location(
+        "agents_evaluate", Path(__file__).resolve().parents[1] / "agents" / "evaluate.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main([str(folder), "--episodes", "2", "--out", str(tmp_path / "out")]) != 0
+    assert not marker.exists()
+    assert "convert-agent" in capsys.readouterr().err
+
+
 # --------------------------------------------------------------------------- finding 2
 def test_a_pickle_planted_in_the_model_runs_nowhere(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("ABB_GYM_TRUST_PICKLE", raising=False)
