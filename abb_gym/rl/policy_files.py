@@ -69,6 +69,16 @@ _CLASS_HOMES = {"torch.nn": "torch.nn.Module", "torch.optim": "torch.optim.Optim
                     "stable_baselines3.common.torch_layers.BaseFeaturesExtractor"}
 #: constructor keywords not recorded: rebuilt for inference without them
 _DROPPED = ("observation_space", "action_space", "lr_schedule")
+#: constructor keywords SB3's ``_get_constructor_parameters`` leaves out (its pickled
+#: ``policy_kwargs`` carried them), read from the policy: keyword -> (attribute, reading)
+_UNRECORDED = {
+    "share_features_extractor": ("share_features_extractor", bool),
+    "lstm_hidden_size": ("lstm_hidden_state_shape", lambda shape: int(shape[2])),
+    "n_lstm_layers": ("lstm_hidden_state_shape", lambda shape: int(shape[0])),
+    "shared_lstm": ("shared_lstm", bool),
+    "enable_critic_lstm": ("enable_critic_lstm", bool),
+    "lstm_kwargs": ("lstm_kwargs", dict),
+}
 
 
 def _error(message: str) -> Exception:
@@ -196,9 +206,9 @@ def describe_policy(policy: Any) -> dict[str, Any]:
         raise ValueError(f"policy class {path} cannot be written as a policy file (one of "
                          f"{sorted(POLICY_CLASSES)})")
     params = dict(policy._get_constructor_parameters())
-    # SB3 leaves it out of the parameters (ActorCriticPolicy's default True is then assumed)
-    if hasattr(policy, "share_features_extractor") and "share_features_extractor" not in params:
-        params["share_features_extractor"] = bool(policy.share_features_extractor)
+    for key, (attribute, read) in _UNRECORDED.items():
+        if key not in params and hasattr(policy, attribute):
+            params[key] = read(getattr(policy, attribute))
     kwargs = {k: _plain(v, f"policy keyword {k!r}") for k, v in params.items()
               if k not in _DROPPED}
     return {"class": path, "kwargs": kwargs,
@@ -246,8 +256,15 @@ def save_policy(policy: Any, path: str | Path, env_id: str, action_kind: str,
     from safetensors.torch import save_model
 
     from .._files import replacing_path
+    description = describe_policy(policy)
+    # a description that would rebuild another network is never written
+    rebuilt = {k: tuple(v.shape) for k, v in build_policy(description).state_dict().items()}
+    if rebuilt != {k: tuple(v.shape) for k, v in policy.state_dict().items()}:
+        raise ValueError(f"the recorded keywords of {description['class']} rebuild another "
+                         f"network (tensors {sorted(rebuilt)[:4]}...): a keyword SB3 does not "
+                         f"report is missing from policy_files._UNRECORDED")
     metadata = {"format": _POLICY_FORMAT, "env_id": env_id, "action_kind": action_kind,
-                "algo": algo, "policy": json.dumps(describe_policy(policy))}
+                "algo": algo, "policy": json.dumps(description)}
     with replacing_path(path) as tmp:
         save_model(policy, str(tmp), metadata=metadata)
     return Path(path)
