@@ -42,7 +42,8 @@ from typing import Any, Callable, Iterable, Mapping
 
 __all__ = ["ConfigError", "Spec", "declare", "specs", "check", "bounds_text", "fields_table",
            "read_yaml", "locate", "parse_assignments", "parse_yaml_value", "build",
-           "parse_python_literal", "strict_yaml_load", "YamlInputError", "MAX_YAML_DEPTH"]
+           "parse_python_literal", "strict_yaml_load", "strict_yaml_loader", "YamlInputError",
+           "MAX_YAML_DEPTH"]
 
 
 MAX_FILE_BYTES = 4 * 1024 * 1024  # a configuration file is a few kB; more is a wrong file
@@ -314,7 +315,7 @@ class YamlInputError(ValueError):
     than :data:`MAX_YAML_DEPTH` (the message says where, without the file's name)."""
 
 
-def _strict_loader() -> type:
+def strict_yaml_loader() -> type:
     """PyYAML's safe loader, refusing duplicate keys and deep nesting (built on first use:
     ``import abb_gym`` does not import yaml)."""
     global _STRICT_LOADER
@@ -370,7 +371,7 @@ def strict_yaml_load(text: str) -> Any:
     """``yaml.safe_load(text)``, but a key given twice in one mapping and nesting deeper than
     :data:`MAX_YAML_DEPTH` raise :class:`YamlInputError` naming the line."""
     import yaml
-    return yaml.load(text, Loader=_strict_loader())  # noqa: S506 - a SafeLoader subclass
+    return yaml.load(text, Loader=strict_yaml_loader())  # noqa: S506 - a SafeLoader subclass
 
 
 # parsed YAML by the SHA-256 of the file's bytes: an evaluation builds an environment per

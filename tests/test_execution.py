@@ -380,15 +380,23 @@ def test_missing_ray_names_the_extra(monkeypatch):
     assert main(["stability-map", "--nx", "1", "--ny", "1", "--ray", "--no-progress"]) == 2
 
 
-def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
-    """No cluster at the address: a ValueError of one line saying how to start one, at once
-    (Ray alone would retry for 30 s to minutes), and exit status 2 from ``abb-gym``."""
+@pytest.fixture
+def no_ray_cluster(monkeypatch) -> int:
+    """A fresh process's view of Ray with ``RAY_ADDRESS`` naming a port nobody listens on
+    (where ``auto`` then looks); the port."""
     ray = pytest.importorskip("ray")
     monkeypatch.setattr(ray, "is_initialized", lambda: False)   # as in a fresh process
     with socket.socket() as s:                                  # a port nobody listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")      # where "auto" then looks
+    return port
+
+
+def test_ray_address_without_cluster_is_one_clear_line(no_ray_cluster, capsys):
+    """No cluster at the address: a ValueError of one line saying how to start one, at once
+    (Ray alone would retry for 30 s to minutes), and exit status 2 from ``abb-gym``."""
+    port = no_ray_cluster
     for address in ("auto", f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
         with pytest.raises(RayConnectionError) as err:
             run_tasks(toy_task, [ToyTask(1)], ray_address=address, progress=False)
@@ -405,15 +413,9 @@ def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
     assert len(err_lines) == 1 and "no Ray cluster found at 'auto'" in err_lines[0]
 
 
-def test_no_progress_bar_before_the_ray_backend_is_up(monkeypatch, capsys, tmp_path):
+def test_no_progress_bar_before_the_ray_backend_is_up(no_ray_cluster, capsys, tmp_path):
     """``stability-map --ray-address auto`` without a cluster: its one error line, and no
     progress bar drawn before it (the bar starts once the backend is connected)."""
-    ray = pytest.importorskip("ray")
-    monkeypatch.setattr(ray, "is_initialized", lambda: False)   # as in a fresh process
-    with socket.socket() as s:                                  # a port nobody listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")      # where "auto" then looks
     from abb_gym.cli import main
     assert main(["stability-map", "--nx", "2", "--ny", "2", "--ray-address", "auto",
                  "--out", str(tmp_path / "map")]) == 2

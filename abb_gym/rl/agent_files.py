@@ -73,8 +73,9 @@ from typing import Any, Mapping, Sequence
 
 import yaml
 
-from ..configuration import ConfigError, read_yaml
+from ..configuration import read_yaml
 from ..resources import TRUST_PICKLE_ENV
+from .errors import AgentError
 
 __all__ = ["AgentError", "PickleRefused", "TrustedPickleWarning", "AgentFiles", "MANIFEST",
            "FORMAT", "LEGACY_FORMAT", "TRUST_ENV", "check_folder", "write_manifest",
@@ -89,10 +90,6 @@ LEGACY_FORMAT = 1
 TRUST_ENV = TRUST_PICKLE_ENV
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 _REWARD_KEYS = ("vibration", "time", "effort", "residual", "failure")
-
-
-class AgentError(ConfigError):
-    """An agent folder is incomplete or inconsistent (the message names the file)."""
 
 
 class PickleRefused(AgentError):

@@ -110,9 +110,9 @@ def read_zoo_yaml(path: Path) -> Any:
     """An rl_zoo3 YAML file (written by ``yaml.dump`` of an ``OrderedDict``), read as data."""
     import yaml
 
-    from ..configuration import MAX_FILE_BYTES, YamlInputError, _strict_loader
+    from ..configuration import MAX_FILE_BYTES, YamlInputError, strict_yaml_loader
 
-    class ZooLoader(_strict_loader()):
+    class ZooLoader(strict_yaml_loader()):
         pass
 
     def ordered(loader, node):

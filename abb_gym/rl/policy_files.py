@@ -24,7 +24,7 @@ Rebuilding (:func:`build_policy`) calls the class with the recorded keywords, as
 shapes).  Only classes on an allow-list are built: the policy classes abb-gym trains
 (:data:`POLICY_CLASSES`), ``torch.nn`` activations, ``torch.optim`` optimisers and SB3's
 feature extractors; every other value must be plain data (numbers, text, lists, mappings).
-A file that asks for anything else is refused with one :class:`~abb_gym.rl.agent_files.AgentError`.
+A file that asks for anything else is refused with one :class:`~abb_gym.rl.errors.AgentError`.
 
 Floats keep every bit: tensors are stored as they are, statistics and spaces as JSON numbers
 (Python writes the shortest text that reads back to the same double).
@@ -38,6 +38,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+
+from .errors import AgentError
 
 __all__ = ["POLICY_CLASSES", "POLICY_FILE", "OPTIMIZER_FILE", "NORMALIZATION_FILE",
            "describe_policy", "build_policy", "save_policy", "load_policy_file",
@@ -82,7 +84,6 @@ _UNRECORDED = {
 
 
 def _error(message: str) -> Exception:
-    from .agent_files import AgentError
     return AgentError(message)
 
 
