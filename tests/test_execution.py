@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,6 +133,40 @@ def test_store_is_atomic_and_ignores_unreadable_files(tmp_path):
         st.save("../evil", 1)
     st.clear()
     assert len(st) == 0
+
+
+class _Payload:
+    """Unpickling this creates the file ``path``: what planted code would do first."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def test_a_planted_result_file_runs_no_code(tmp_path):
+    """Task ids are predictable (a hash of the task function and spec), so anyone who can
+    write the resume folder can plant a file under the id of the next task: as a pickle in
+    the name an older abb-gym read (``<id>.pkl``), or inside the archive this one reads (an
+    object array, which NumPy would unpickle).  Neither runs, and every task is computed."""
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path / "m")) for i in range(4)]
+    (tmp_path / "m").mkdir()
+    ids, store, marker = _ids(tasks), tmp_path / "store", tmp_path / "created_by_the_payload"
+    store.mkdir()
+    (store / f"{ids[0]}.pkl").write_bytes(pickle.dumps(
+        {"format": 1, "task_id": ids[0], "result": _Payload(marker)}))
+    payload = np.empty(1, dtype=object)
+    payload[0] = _Payload(marker)
+    with open(store / f"{ids[1]}.npz", "wb") as fh:
+        np.savez(fh, record=np.frombuffer(b'{"format": 2}', dtype=np.uint8), a0=payload)
+    with warnings.catch_warnings(record=True) as warned:
+        warnings.simplefilter("always")
+        out = run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
+    assert not marker.exists(), "a planted result file ran its code"
+    assert out == _expected(4) and count_computed(tmp_path / "m") == {i: 1 for i in range(4)}
+    text = " ".join(str(w.message) for w in warned)
+    assert "older abb-gym" in text and f"{ids[1]}.npz" in text
 
 
 def _ids(tasks, seed=7):
