@@ -23,8 +23,8 @@ fields, and ``import abb_gym`` must stay light; a 150-line module does that, whe
 would need a custom validator per rule and a reformatting of every message it produces.
 
 Files: :func:`read_yaml` reads one YAML mapping and turns every way a file can be wrong
-(missing, a directory, not text, not YAML, not a mapping) into one error line naming the
-file; :func:`locate` resolves "a name or a path" on the search path of
+(missing, a directory, not text, not YAML, not a mapping, a key given twice, nesting deeper
+than :data:`MAX_YAML_DEPTH`) into one error line naming the file; :func:`locate` resolves "a name or a path" on the search path of
 :mod:`abb_gym.resources`; :func:`parse_assignments` reads ``KEY=VALUE`` options (values are
 YAML, read safely: no code is evaluated).
 """
@@ -42,10 +42,15 @@ from typing import Any, Callable, Iterable, Mapping
 
 __all__ = ["ConfigError", "Spec", "declare", "specs", "check", "bounds_text", "fields_table",
            "read_yaml", "locate", "parse_assignments", "parse_yaml_value", "build",
-           "parse_python_literal"]
+           "parse_python_literal", "strict_yaml_load", "strict_yaml_loader", "YamlInputError",
+           "MAX_YAML_DEPTH"]
 
 
 MAX_FILE_BYTES = 4 * 1024 * 1024  # a configuration file is a few kB; more is a wrong file
+#: the deepest nesting of mappings and lists a YAML file may have: the deepest configuration
+#: (a PPO config's ``_abb_gym.eval_env_kwargs.reward``) has 4 levels; PyYAML builds nested
+#: nodes recursively and a file of a few thousand levels ends in a RecursionError
+MAX_YAML_DEPTH = 64
 
 
 class ConfigError(ValueError):
@@ -289,7 +294,9 @@ def read_yaml(path: str | os.PathLike, what: str, error: type[ValueError] = Conf
     key = hashlib.sha256(data_bytes).digest()
     if key not in _PARSED:
         try:
-            _PARSED[key] = yaml.safe_load(text)
+            _PARSED[key] = strict_yaml_load(text)
+        except YamlInputError as exc:
+            raise error(f"{label} {exc}") from None
         except yaml.YAMLError as exc:
             raise error(f"{label} is not valid YAML: {' '.join(str(exc).split())}") from None
         while len(_PARSED) > _PARSED_MAX:
@@ -301,6 +308,70 @@ def read_yaml(path: str | os.PathLike, what: str, error: type[ValueError] = Conf
         if not isinstance(data, Mapping):
             raise error(f"{label} must hold a mapping of fields (got {type(data).__name__})")
     return data
+
+
+class YamlInputError(ValueError):
+    """YAML that parses but cannot be taken as meant: a key given twice, or nesting deeper
+    than :data:`MAX_YAML_DEPTH` (the message says where, without the file's name)."""
+
+
+def strict_yaml_loader() -> type:
+    """PyYAML's safe loader, refusing duplicate keys and deep nesting (built on first use:
+    ``import abb_gym`` does not import yaml)."""
+    global _STRICT_LOADER
+    if _STRICT_LOADER is not None:
+        return _STRICT_LOADER
+    import yaml
+
+    class StrictSafeLoader(yaml.SafeLoader):
+        """Why: PyYAML keeps the last of two equal keys without a word (a scene with
+        ``drag`` twice silently used the second), and composes nested nodes recursively,
+        so a deep file raised RecursionError with a traceback of thousands of lines."""
+
+        def compose_node(self, parent, index):
+            depth = getattr(self, "_depth", 0)
+            if depth >= MAX_YAML_DEPTH:
+                mark = self.peek_event().start_mark
+                raise YamlInputError(f"line {mark.line + 1}: nesting deeper than "
+                                     f"{MAX_YAML_DEPTH} levels (configuration files nest a "
+                                     f"few levels)")
+            self._depth = depth + 1
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._depth = depth
+
+        def construct_mapping(self, node, deep=False):
+            if isinstance(node, yaml.MappingNode):
+                seen: dict[Any, int] = {}
+                for key_node, _ in node.value:
+                    if key_node.tag == "tag:yaml.org,2002:merge":
+                        continue  # a merged key (<<) may be overridden: that is its purpose
+                    key = self.construct_object(key_node, deep=True)
+                    line = key_node.start_mark.line + 1
+                    try:
+                        first = seen.get(key)
+                        seen.setdefault(key, line)
+                    except TypeError:  # an unhashable key: the base class says so
+                        continue
+                    if first is not None:
+                        raise YamlInputError(f"line {line}: key {key!r} is given twice (also "
+                                             f"on line {first}); YAML would keep only the "
+                                             f"last value")
+            return super().construct_mapping(node, deep=deep)
+
+    _STRICT_LOADER = StrictSafeLoader
+    return StrictSafeLoader
+
+
+_STRICT_LOADER: type | None = None
+
+
+def strict_yaml_load(text: str) -> Any:
+    """``yaml.safe_load(text)``, but a key given twice in one mapping and nesting deeper than
+    :data:`MAX_YAML_DEPTH` raise :class:`YamlInputError` naming the line."""
+    import yaml
+    return yaml.load(text, Loader=strict_yaml_loader())  # noqa: S506 - a SafeLoader subclass
 
 
 # parsed YAML by the SHA-256 of the file's bytes: an evaluation builds an environment per
@@ -363,7 +434,9 @@ def parse_yaml_value(text: str, where: str, error: type[ValueError] = ConfigErro
     import yaml
 
     try:
-        value = yaml.safe_load(text)
+        value = strict_yaml_load(text)
+    except YamlInputError as exc:
+        raise error(f"{where}: {exc}") from None
     except yaml.YAMLError as exc:
         raise error(f"{where}: {text!r} is not a valid YAML value "
                     f"({' '.join(str(exc).split()[:8])})") from None

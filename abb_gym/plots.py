@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ._files import savefig  # noqa: E402
 from .physics.trajectory import Trajectory  # noqa: E402
 
 __all__ = ["plot_runup", "plot_runup_comparison", "short_label"]
@@ -89,7 +90,7 @@ def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
     axes[1].set_ylim(min(-200.0, lo - 20), max(30.0, hi + 20))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    path = savefig(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -134,6 +135,6 @@ def plot_training_curves(curves: Mapping[str, Mapping[str, np.ndarray]], path: s
                  fontsize=10)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    path = savefig(fig, path, dpi=100)
     plt.close(fig)
     return path

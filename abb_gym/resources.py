@@ -18,7 +18,7 @@ kind            file                                   what
 ``baselines``   ``baselines/<scene>.yaml``             tuned baseline parameters
 ``ppo``         ``ppo/<name>.yml``                     PPO training configurations
 ``spring_rod``  ``spring_rod/<name>.yaml``             spring-and-rod balancer parameters
-``agents``      ``agents/<name>/model.zip`` (+ files)  trained agents (``ppo:NAME``)
+``agents``      ``agents/<name>/agent.yml`` (+ files)  trained agents (``ppo:NAME``)
 ==============  ====================================  ========================================
 
 Nothing here writes: commands that produce files (``tune-baselines``, ``train``) write where
@@ -30,10 +30,13 @@ import os
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["ENV_VAR", "KINDS", "shipped_folder", "user_folders", "add_user_folder",
-           "search_path", "find", "names", "is_shipped"]
+__all__ = ["ENV_VAR", "TRUST_PICKLE_ENV", "KINDS", "shipped_folder", "user_folders", "add_user_folder",
+           "search_path", "find", "names", "is_shipped", "is_agent_folder"]
 
 ENV_VAR = "ABB_GYM_CONFIGS"
+#: the environment variable that trusts pickled agent files (``--trust-pickle``; see
+#: :mod:`abb_gym.rl.agent_files`): read by the agent loaders, in worker processes too
+TRUST_PICKLE_ENV = "ABB_GYM_TRUST_PICKLE"
 KINDS = ("scenes", "envs", "baselines", "ppo", "spring_rod", "agents")
 SUFFIXES = {"scenes": (".yaml", ".yml"), "envs": (".yaml", ".yml"),
             "baselines": (".yaml", ".yml"), "ppo": (".yml", ".yaml"),
@@ -89,7 +92,7 @@ def find(kind: str, name: str) -> Path | None:
         for suffix in SUFFIXES[kind]:
             candidate = folder / f"{name}{suffix}"
             if kind == "agents":
-                if (candidate / "model.zip").is_file():
+                if is_agent_folder(candidate):
                     return candidate
             elif candidate.is_file():
                 return candidate
@@ -103,11 +106,17 @@ def names(kind: str) -> list[str]:
         if not folder.is_dir():
             continue
         if kind == "agents":
-            found.update(p.name for p in folder.iterdir() if (p / "model.zip").is_file())
+            found.update(p.name for p in folder.iterdir() if is_agent_folder(p))
         else:
             found.update(p.stem for p in folder.iterdir()
                          if p.is_file() and p.suffix in SUFFIXES[kind])
     return sorted(found)
+
+
+def is_agent_folder(folder: Path) -> bool:
+    """True if ``folder`` holds an agent: its manifest (``agent.yml``), or the ``model.zip``
+    of a folder saved before manifests (:mod:`abb_gym.rl.agent_files`)."""
+    return (folder / "agent.yml").is_file() or (folder / "model.zip").is_file()
 
 
 def is_shipped(path: str | os.PathLike) -> bool:

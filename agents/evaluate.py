@@ -126,7 +126,7 @@ def main(argv=None) -> int:
     from abb_gym.rl.comparison import compare_agent, training_section
     everything = not args.agents
     agents = args.agents or sorted(d.name for d in trained_dir().iterdir()
-                                   if (d / "model.zip").exists())
+                                   if (d / "agent.yml").exists())
     try:
         check_args(args)
         # the oracle's searches and its replays with the balls elsewhere run there; the

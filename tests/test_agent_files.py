@@ -5,10 +5,14 @@ that :func:`abb_gym.rl.load_policy` (and ``abb-gym evaluate --policy ppo:COPY``)
 with one :class:`~abb_gym.rl.agent_files.AgentError` line naming the file: a missing, foreign,
 truncated, empty, random or mistyped file, a directory in a file's place, and invalid YAML.
 The hypothesis test draws such corruptions (and manifests rewritten to match them) at random.
+Nothing is unpickled: a pickle written in a file's place is refused like any other bytes
+(the planted payloads are in tests/test_safe_agents.py).
 """
 from __future__ import annotations
 
+import json
 import pickle
+import re
 import shutil
 import tempfile
 import tomllib
@@ -29,8 +33,8 @@ from abb_gym.rl.agent_files import (MANIFEST, AgentError, check_folder,  # noqa:
 
 REPO = Path(__file__).resolve().parents[1]
 SPEED = "runup_speed_yoshida_odd"
-SHIPPED = sorted(d.name for d in trained_dir().iterdir() if (d / "model.zip").is_file())
-BINARIES = ("model.zip", "vecnormalize.pkl")
+SHIPPED = sorted(d.name for d in trained_dir().iterdir() if (d / MANIFEST).is_file())
+BINARIES = ("policy.safetensors", "vecnormalize.json")
 FILES = BINARIES + ("config.yml", MANIFEST)
 
 
@@ -68,21 +72,15 @@ def retag(folder: Path, name: str) -> None:
     path.write_text(yaml.safe_dump(data, sort_keys=False))
 
 
-@pytest.mark.parametrize("missing", ["epsilon", "clip_obs", "norm_obs", "obs_rms"])
-def test_statistics_missing_an_attribute_are_one_error_not_a_recursion(agent, missing):
-    """A damaged pickle can restore a VecNormalize without some attribute; SB3 looks a missing
-    one up on the wrapped environment, which an unpickled VecNormalize lacks, and recursed
-    without end (found by the corrupted-folder fuzz under repeated runs)."""
-    import pickle
-    path = agent / "vecnormalize.pkl"
-    with open(path, "rb") as fh:
-        vn = pickle.load(fh)
-    del vn.__dict__[missing]
-    # what VecNormalize.__getstate__ drops on saving (an unpickled one lacks them)
-    vn.__dict__.update(venv=None, class_attributes={}, returns=np.zeros(1))
-    path.write_bytes(pickle.dumps(vn))
-    retag(agent, "vecnormalize.pkl")
-    assert "vecnormalize.pkl" in load_error(agent)
+@pytest.mark.parametrize("missing", ["epsilon", "clip_obs", "norm_obs", "obs_rms", "format"])
+def test_statistics_missing_a_field_are_one_error_naming_it(agent, missing):
+    path = agent / "vecnormalize.json"
+    data = json.loads(path.read_text())
+    del data[missing]
+    path.write_text(json.dumps(data))
+    retag(agent, "vecnormalize.json")
+    msg = load_error(agent)
+    assert "vecnormalize.json" in msg and (missing in msg or "statistics file" in msg), msg
 
 
 # --------------------------------------------------------------------------- shipped agents
@@ -113,7 +111,7 @@ def test_the_wheel_ships_the_manifests():
 def test_an_intact_copy_loads_and_checks_the_observation_layout(agent):
     pol = load_policy(agent)
     assert pol.observation_names[0] == "rotor_speed"
-    assert pol.vecnormalize.obs_rms.mean.shape == (6,)
+    assert pol.vecnormalize.mean.shape == (6,)
     env = make_native_env("abb_gym/RunUpSpeed-v0", 1,
                           {"scene": "yoshida_odd", "preset": "test", "control_interval": 0.05})
     pol.reset(env, np.ones(1, bool))  # the recorded layout is the environment's
@@ -126,10 +124,10 @@ def test_an_intact_copy_loads_and_checks_the_observation_layout(agent):
 
 # --------------------------------------------------------------------------- missing files
 @pytest.mark.parametrize("name, match", [
-    ("vecnormalize.pkl", r"vecnormalize.pkl' is missing: the agent was trained on normalised"),
+    ("vecnormalize.json", r"vecnormalize.json' is missing: the agent was trained on normalised"),
     ("config.yml", r"config.yml' does not exist"),
-    (MANIFEST, r"has no agent.yml .* run .python -m abb_gym.rl.agent_files"),
-    ("model.zip", r"model.zip' is missing"),
+    (MANIFEST, r"has no agent.yml"),
+    ("policy.safetensors", r"policy.safetensors' is missing"),
 ])
 def test_a_missing_file_is_refused(agent, name, match):
     (agent / name).unlink()
@@ -140,22 +138,29 @@ def test_a_missing_file_is_refused(agent, name, match):
 def test_a_manifest_without_normalisation_refuses_a_statistics_file(agent):
     data = yaml.safe_load((agent / MANIFEST).read_text())
     data["vecnormalize"] = False
-    del data["files"]["vecnormalize.pkl"]
+    del data["files"]["vecnormalize.json"]
     (agent / MANIFEST).write_text(yaml.safe_dump(data))
     assert "does not belong to this agent" in load_error(agent)
-    (agent / "vecnormalize.pkl").unlink()
+    (agent / "vecnormalize.json").unlink()
     assert load_policy(agent).vecnormalize is None
 
 
 # --------------------------------------------------------------------------- foreign files
+def _foreign(name: str, donor: str) -> str:
+    """What the manifest check says of ``donor``'s ``name`` in the SPEED agent's folder: its
+    size differs, or (the same size) its fingerprint."""
+    if size(name, donor) != size(name):
+        return rf"{name}' has {size(name, donor)} bytes, agent.yml records {size(name)}"
+    return rf"{name}' is not the file the agent was saved with"
+
+
 @pytest.mark.parametrize("name, donor, match", [
-    ("vecnormalize.pkl", "runup_speed_spannan_cfrp",
-     rf"vecnormalize.pkl' has {size('vecnormalize.pkl', 'runup_speed_spannan_cfrp')} bytes, "
-     rf"agent.yml records {size('vecnormalize.pkl')}"),
-    ("vecnormalize.pkl", "runup_torque_yoshida_odd",
-     rf"vecnormalize.pkl' has {size('vecnormalize.pkl', 'runup_torque_yoshida_odd')} bytes"),
-    ("model.zip", "runup_torque_yoshida_odd",
-     rf"model.zip' has {size('model.zip', 'runup_torque_yoshida_odd')} bytes"),
+    ("vecnormalize.json", "runup_speed_spannan_cfrp",
+     _foreign("vecnormalize.json", "runup_speed_spannan_cfrp")),
+    ("vecnormalize.json", "runup_torque_yoshida_odd",
+     _foreign("vecnormalize.json", "runup_torque_yoshida_odd")),
+    ("policy.safetensors", "runup_torque_yoshida_odd",
+     _foreign("policy.safetensors", "runup_torque_yoshida_odd")),
     ("config.yml", "runup_torque_yoshida_odd", r"records env id .*RunUpSpeed.*RunUpTorque"),
     ("config.yml", "runup_speed_spannan_cfrp", r"records scene 'yoshida_odd', config.yml "
                                                r"'spannan_cfrp'"),
@@ -167,18 +172,17 @@ def test_another_agents_file_is_refused(agent, name, donor, match):
 
 
 def test_another_agents_statistics_are_refused_by_evaluate(agent, tmp_path, capsys):
-    shutil.copy(trained_dir() / "runup_speed_spannan_cfrp" / "vecnormalize.pkl",
-                agent / "vecnormalize.pkl")
+    shutil.copy(trained_dir() / "runup_speed_spannan_cfrp" / "vecnormalize.json",
+                agent / "vecnormalize.json")
     rc = main(["evaluate", "--policy", f"ppo:{agent}", "--episodes", "1",
                "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
-    foreign = size("vecnormalize.pkl", "runup_speed_spannan_cfrp")
-    assert rc == 2 and f"vecnormalize.pkl' has {foreign} bytes" in err and "replaced" in err
+    assert rc == 2 and re.search(_foreign("vecnormalize.json", "runup_speed_spannan_cfrp"), err)
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
-    (agent / "vecnormalize.pkl").unlink()
+    (agent / "vecnormalize.json").unlink()
     assert main(["evaluate", "--policy", f"replay:ppo:{agent}", "--episodes", "1",
                  "--out", str(tmp_path / "out")]) == 2
-    assert "vecnormalize.pkl' is missing" in capsys.readouterr().err
+    assert "vecnormalize.json' is missing" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- corrupt files
@@ -196,6 +200,7 @@ CORRUPTIONS = {
     "empty": lambda p: p.write_bytes(b""),
     "random": lambda p: p.write_bytes(np.random.default_rng(0).bytes(p.stat().st_size)),
     "pickled dict": lambda p: p.write_bytes(pickle.dumps({"obs_rms": [0.0] * 6})),
+    "json list": lambda p: p.write_text("[1, 2]"),
     "directory": _dir,
     "invalid yaml": lambda p: p.write_text("_run: {env_id: [\n"),
     "a list": lambda p: p.write_text("- 1\n- 2\n"),
@@ -203,21 +208,22 @@ CORRUPTIONS = {
 
 
 @pytest.mark.parametrize("name, how, match", [
-    ("vecnormalize.pkl", "truncated",
-     rf"vecnormalize.pkl' has {size('vecnormalize.pkl') // 2} bytes, agent.yml records "
-     rf"{size('vecnormalize.pkl')}: truncated"),
-    ("vecnormalize.pkl", "empty", r"vecnormalize.pkl' is empty"),
-    ("vecnormalize.pkl", "random", r"vecnormalize.pkl' is not the file the agent was saved"),
-    ("vecnormalize.pkl", "pickled dict", r"vecnormalize.pkl' has \d+ bytes"),
-    ("vecnormalize.pkl", "directory", r"vecnormalize.pkl' is a directory"),
-    ("model.zip", "truncated", rf"model.zip' has {size('model.zip') // 2} bytes"),
-    ("model.zip", "directory", r"model.zip' is a directory"),
+    ("vecnormalize.json", "truncated",
+     rf"vecnormalize.json' has {size('vecnormalize.json') // 2} bytes, agent.yml records "
+     rf"{size('vecnormalize.json')}: truncated"),
+    ("vecnormalize.json", "empty", r"vecnormalize.json' is empty"),
+    ("vecnormalize.json", "random", r"vecnormalize.json' is not the file the agent was saved"),
+    ("vecnormalize.json", "pickled dict", r"vecnormalize.json' has \d+ bytes"),
+    ("vecnormalize.json", "directory", r"vecnormalize.json' is a directory"),
+    ("policy.safetensors", "truncated",
+     rf"policy.safetensors' has {size('policy.safetensors') // 2} bytes"),
+    ("policy.safetensors", "directory", r"policy.safetensors' is a directory"),
     ("config.yml", "invalid yaml", r"config.yml' is not valid YAML"),
     ("config.yml", "a list", r"config.yml' must hold a mapping of fields \(got list\)"),
     ("config.yml", "directory", r"config.yml' is a directory"),
     (MANIFEST, "invalid yaml", r"agent.yml' is not valid YAML"),
     (MANIFEST, "a list", r"agent.yml' must hold a mapping"),
-    (MANIFEST, "empty", r"agent.yml.*'format' must be 1"),
+    (MANIFEST, "empty", r"agent.yml.*'format' must be 2"),
 ])
 def test_a_corrupt_file_is_one_line(agent, name, how, match):
     CORRUPTIONS[how](agent / name)
@@ -226,11 +232,13 @@ def test_a_corrupt_file_is_one_line(agent, name, how, match):
 
 
 @pytest.mark.parametrize("name, how, match", [
-    ("vecnormalize.pkl", "truncated", r"cannot be read as VecNormalize statistics"),
-    ("vecnormalize.pkl", "random", r"cannot be read as VecNormalize statistics"),
-    ("vecnormalize.pkl", "pickled dict", r"holds a dict, not VecNormalize statistics"),
-    ("model.zip", "truncated", r"model.zip' cannot be read as an SB3 PPO model"),
-    ("model.zip", "random", r"model.zip' cannot be read as an SB3 PPO model"),
+    ("vecnormalize.json", "truncated", r"cannot be read as normalisation statistics"),
+    ("vecnormalize.json", "random", r"cannot be read as normalisation statistics"),
+    ("vecnormalize.json", "pickled dict", r"cannot be read as normalisation statistics"),
+    ("vecnormalize.json", "json list", r"is not an abb-gym statistics file"),
+    ("policy.safetensors", "truncated", r"policy.safetensors' cannot be read as a safetensors"),
+    ("policy.safetensors", "random", r"policy.safetensors' cannot be read as a safetensors"),
+    ("policy.safetensors", "pickled dict", r"policy.safetensors' cannot be read as a safet"),
 ])
 def test_a_corrupt_file_behind_a_rewritten_manifest_is_one_line(agent, name, how, match):
     CORRUPTIONS[how](agent / name)
@@ -240,34 +248,27 @@ def test_a_corrupt_file_behind_a_rewritten_manifest_is_one_line(agent, name, how
 
 
 def test_statistics_of_another_size_are_refused_when_read(agent):
-    with open(agent / "vecnormalize.pkl", "rb") as fh:
-        vn = pickle.load(fh)
-    vn.obs_rms.mean = np.zeros(8)
-    vn.obs_rms.var = np.ones(8)
-    # attributes that unpickling leaves out and VecNormalize's pickling expects
-    vn.class_attributes, vn.returns = {}, np.zeros(1)
-    with open(agent / "vecnormalize.pkl", "wb") as fh:
-        pickle.dump(vn, fh)
-    retag(agent, "vecnormalize.pkl")
-    assert "statistics of (8,) observations" in load_error(agent)
+    path = agent / "vecnormalize.json"
+    data = json.loads(path.read_text())
+    data["obs_rms"]["mean"], data["obs_rms"]["var"] = [0.0] * 8, [1.0] * 8
+    path.write_text(json.dumps(data))
+    retag(agent, "vecnormalize.json")
+    assert "obs_rms.mean must be 6 numbers" in load_error(agent)
 
 
 def test_write_manifest_refuses_corrupt_files(agent):
-    CORRUPTIONS["pickled dict"](agent / "vecnormalize.pkl")
-    with pytest.raises(AgentError, match="holds a dict"):
+    CORRUPTIONS["pickled dict"](agent / "vecnormalize.json")
+    with pytest.raises(AgentError, match="cannot be read as normalisation statistics"):
         write_manifest(agent)
-    assert yaml.safe_load((agent / MANIFEST).read_text())["files"]["vecnormalize.pkl"][
-        "bytes"] == size("vecnormalize.pkl")  # the old manifest is left as it was
+    assert yaml.safe_load((agent / MANIFEST).read_text())["files"]["vecnormalize.json"][
+        "bytes"] == size("vecnormalize.json")  # the old manifest is left as it was
 
 
-def test_the_manifest_module_command(agent, capsys):
-    from abb_gym.rl.agent_files import main as manifest_main
+def test_a_folder_without_a_manifest_says_what_writes_one(agent):
     (agent / MANIFEST).unlink()
-    assert manifest_main([str(agent)]) == 0
+    assert "`abb-gym train` and `abb-gym convert-agent` write it" in load_error(agent)
+    write_manifest(agent)
     assert load_policy(agent).observation_names[0] == "rotor_speed"
-    (agent / "config.yml").unlink()
-    assert manifest_main([str(agent)]) == 2
-    assert "config.yml' does not exist" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- hypothesis
@@ -314,7 +315,8 @@ else:
         st.tuples(st.just("pickle"), st.sampled_from([{}, {"obs_rms": None}, [1.0, 2.0], "x", None,
                                                       np.zeros(6)])),
         st.tuples(st.just("yaml"), st.sampled_from(["[1, 2]", "a: [", "_run: 3", "", "null",
-                                                    "- x", "format: 1\nfiles: {}\n", "\x00"])),
+                                                    "- x", "format: 2\nfiles: {}\n", "\x00",
+                                                    "format: 1\nfiles: {}\n"])),
         st.tuples(st.just("foreign"), st.sampled_from([n for n in SHIPPED if n != SPEED])),
     )
 

@@ -628,12 +628,12 @@ def test_yaml_files_are_parsed_once_per_content_and_reread_when_changed(tmp_path
     """read_yaml parses a text once (an evaluation reads the same files per chunk), but every
     call reads and checks the file: a changed file gives its new content, a file turned bad
     gives the error, and what a caller changes in its copy does not reach the next caller."""
-    import yaml
-
+    from abb_gym import configuration
     from abb_gym.configuration import ConfigError, read_yaml
     calls = []
-    real = yaml.safe_load
-    monkeypatch.setattr(yaml, "safe_load", lambda text: calls.append(text) or real(text))
+    real = configuration.strict_yaml_load
+    monkeypatch.setattr(configuration, "strict_yaml_load",
+                        lambda text: calls.append(text) or real(text))
     path = tmp_path / "x.yaml"
     path.write_text("a: {b: 1}\nunique: 7f3c\n")
     first = read_yaml(path, "test")

@@ -132,7 +132,7 @@ def test_the_training_script_has_one_line_usage_errors(capsys):
 
 
 # ------------------ empty output paths: read as "no output" or as the current folder before
-@pytest.mark.parametrize("argv, option", [
+_EMPTY_PATH_CASES = [
     (["simulate", "--t-end", "0.01", "--json", ""], "--json"),
     (["simulate", "--t-end", "0.01", "--plot", " "], "--plot"),
     (["demo", "--out", ""], "--out"),
@@ -145,13 +145,50 @@ def test_the_training_script_has_one_line_usage_errors(capsys):
     (["tune-baselines", "--out", ""], "--out"),
     (["stability-map", "--resume-dir", ""], "--resume-dir"),
     (["--configs", "", "simulate", "--t-end", "0.01"], "--configs"),
+    (["render", "--policy", "baseline:ramp", "--out", ""], "--out"),
+    (["render", "--policy", "baseline:ramp", "--out", " "], "--out"),
+    (["evaluate", "--policy", "baseline:ramp", "--resume-dir", ""], "--resume-dir"),
+    (["tune-baselines", "--resume-dir", " "], "--resume-dir"),
+    (["study", "settling", "--resume-dir", ""], "--resume-dir"),
 ] + ([(["train", "--config", "runup_speed_yoshida_odd", "--out", ""], "--out"),
       (["train", "--config", "runup_speed_yoshida_odd", "--tensorboard-log", ""],
-       "--tensorboard-log")] if HAVE_TRAIN else []))
+       "--tensorboard-log"),
+      (["convert-agent", "runs/x", "--out", ""], "--out"),
+      (["convert-agent", ""], "source")] if HAVE_TRAIN else [])
+
+
+@pytest.mark.parametrize("argv, option", _EMPTY_PATH_CASES)
 def test_empty_paths_are_refused_not_read_as_no_output_or_here(argv, option, stubbed):
     before = sorted(p.name for p in stubbed.iterdir())
     refused(argv, option)
     assert sorted(p.name for p in stubbed.iterdir()) == before  # nothing written here
+
+
+#: the options of every subcommand that name a file or folder to write
+PATH_OPTIONS = ("--out", "--json", "--plot", "--resume-dir", "--tensorboard-log")
+
+
+def test_every_output_path_option_of_every_command_refuses_an_empty_path():
+    """No command takes an empty output path as the current folder or as its default: each
+    output option of each (sub)command appears in the regression list above."""
+    import argparse
+    from abb_gym.cli import build_parser
+
+    def commands(parser, prefix=()):
+        sub = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not sub:
+            yield prefix, parser
+        for action in sub:
+            for name, child in action.choices.items():
+                yield from commands(child, prefix + (name,))
+
+    covered = {(tuple(a for a in argv if not a.startswith("-") and a)[:len(argv)], option)
+               for argv, option in _EMPTY_PATH_CASES}
+    for names, parser in commands(build_parser()):
+        for action in parser._actions:
+            for option in set(action.option_strings) & set(PATH_OPTIONS):
+                assert any(c[1] == option and c[0][:len(names)] == names for c in covered), \
+                    (" ".join(names), option)
 
 
 @pytest.mark.parametrize("path", ["a\x00b.json", "x" * 300 + ".json",
@@ -322,16 +359,20 @@ def test_tuning_work_that_cannot_fit_is_refused_before_the_search():
     refused(["tune-baselines", "--dry-run", "--restarts", "101"], "--restarts")
 
 
-def test_tuning_from_the_tuned_parameters_needs_them():
-    """``--from-tuned`` on a scene given by path (no tuned file goes with it) names the
-    option and the family."""
+def test_tuning_from_the_tuned_parameters_needs_them(tmp_path):
+    """``--from-tuned`` on a scene without tuned parameters names the option and the family;
+    the tuned file is found by the scene's name, whether the scene is given by name or by
+    path."""
     from abb_gym import resources
-    scene = str(resources.find("scenes", "yoshida_odd"))
-    line = refused(["tune-baselines", "--dry-run", "--scene", scene, "--family", "ramp",
+    shipped = resources.find("scenes", "yoshida_odd")
+    scene = tmp_path / "copy.yaml"
+    scene.write_text(shipped.read_text().replace("name: yoshida_odd", "name: untuned_machine"))
+    line = refused(["tune-baselines", "--dry-run", "--scene", str(scene), "--family", "ramp",
                     "--from-tuned"], "--from-tuned")
-    assert "ramp" in line and "no baselines file" in line
-    assert run(["tune-baselines", "--dry-run", "--family", "ramp", "--from-tuned"])[0] == \
-        "reached"
+    assert "ramp" in line and "untuned_machine" in line and "no baselines file" in line
+    for given in ("yoshida_odd", str(shipped)):
+        assert run(["tune-baselines", "--dry-run", "--scene", given, "--family", "ramp",
+                    "--from-tuned"])[0] == "reached"
 
 
 @pytest.mark.parametrize("key", ["num_envs", "vectorization_mode", "record_history", "scene",

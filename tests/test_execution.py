@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,13 +126,47 @@ def test_store_is_atomic_and_ignores_unreadable_files(tmp_path):
     st.save(tid, {"v": 1})
     assert st.load(tid) == (True, {"v": 1}) and list(st.ids()) == [tid]
     assert not list((tmp_path / "s").glob(".*.tmp"))              # no temporary file left
-    (tmp_path / "s" / f"{tid}.pkl").write_bytes(b"\x80\x04truncated")
-    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tid}.pkl"):
+    (tmp_path / "s" / f"{tid}.npz").write_bytes(b"PK\x03\x04truncated")
+    with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tid}.npz"):
         assert st.load(tid) == (False, None)                      # recomputed, not an error
     with pytest.raises(ValueError, match="task id"):
         st.save("../evil", 1)
     st.clear()
     assert len(st) == 0
+
+
+class _Payload:
+    """Unpickling this creates the file ``path``: what planted code would do first."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def test_a_planted_result_file_runs_no_code(tmp_path):
+    """Task ids are predictable (a hash of the task function and spec), so anyone who can
+    write the resume folder can plant a file under the id of the next task: as a pickle in
+    the name an older abb-gym read (``<id>.pkl``), or inside the archive this one reads (an
+    object array, which NumPy would unpickle).  Neither runs, and every task is computed."""
+    tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path / "m")) for i in range(4)]
+    (tmp_path / "m").mkdir()
+    ids, store, marker = _ids(tasks), tmp_path / "store", tmp_path / "created_by_the_payload"
+    store.mkdir()
+    (store / f"{ids[0]}.pkl").write_bytes(pickle.dumps(
+        {"format": 1, "task_id": ids[0], "result": _Payload(marker)}))
+    payload = np.empty(1, dtype=object)
+    payload[0] = _Payload(marker)
+    with open(store / f"{ids[1]}.npz", "wb") as fh:
+        np.savez(fh, record=np.frombuffer(b'{"format": 2}', dtype=np.uint8), a0=payload)
+    with warnings.catch_warnings(record=True) as warned:
+        warnings.simplefilter("always")
+        out = run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
+    assert not marker.exists(), "a planted result file ran its code"
+    assert out == _expected(4) and count_computed(tmp_path / "m") == {i: 1 for i in range(4)}
+    text = " ".join(str(w.message) for w in warned)
+    assert "older abb-gym" in text and f"{ids[1]}.npz" in text
 
 
 def _ids(tasks, seed=7):
@@ -145,24 +180,25 @@ def test_damaged_store_is_named_or_healed(tmp_path):
     tasks = [ToyTask(key=i, x=float(i), marker_dir=str(tmp_path)) for i in range(6)]
     ids, store = _ids(tasks), tmp_path / "store"
     run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
-    tampered = store / f"{ids[2]}.pkl"
+    tampered = store / f"{ids[2]}.npz"
     tampered.write_text("Every result in this store is wrong\n")
     with pytest.warns(RuntimeWarning, match=f"unreadable result file .*{tampered.name}"):
         out = run_tasks(toy_task, tasks, workers=1, seed=7, store=store, progress=False)
     assert out == _expected(6) and count_computed(tmp_path)[2] == 2
     assert ResultStore(store).load(ids[2]) == (True, out[2])     # healed
 
-    (store / f"{ids[4]}.pkl").unlink()
-    (store / f"{ids[4]}.pkl").mkdir()
-    with pytest.raises(ValueError, match=f"{ids[4]}.pkl' is a directory"):
+    (store / f"{ids[4]}.npz").unlink()
+    (store / f"{ids[4]}.npz").mkdir()
+    with pytest.raises(ValueError, match=f"{ids[4]}.npz' is a directory"):
         run_tasks(toy_task, tasks, workers=2, seed=7, store=store, progress=False)
     assert count_started(tmp_path)[4] == 1                       # failed before running
     assert ids[4] not in set(ResultStore(store).ids())
-    (store / f"{ids[4]}.pkl").rmdir()
+    (store / f"{ids[4]}.npz").rmdir()
 
     # leftovers of a run killed mid-write: full records, but not results
-    (store / f"{ids[4]}.pkl").unlink(missing_ok=True)
-    record = pickle.dumps({"format": 1, "task_id": ids[4], "result": -1.0})
+    (store / f"{ids[4]}.npz").unlink(missing_ok=True)
+    ResultStore(tmp_path / "other").save(ids[4], -1.0, "abb_gym.execution.testing:toy_task")
+    record = (tmp_path / "other" / f"{ids[4]}.npz").read_bytes()
     stale, fresh = store / f".{ids[4]}.old.tmp", store / f".{ids[4]}.new.tmp"
     stale.write_bytes(record)
     fresh.write_bytes(record)
@@ -379,15 +415,23 @@ def test_missing_ray_names_the_extra(monkeypatch):
     assert main(["stability-map", "--nx", "1", "--ny", "1", "--ray", "--no-progress"]) == 2
 
 
-def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
-    """No cluster at the address: a ValueError of one line saying how to start one, at once
-    (Ray alone would retry for 30 s to minutes), and exit status 2 from ``abb-gym``."""
+@pytest.fixture
+def no_ray_cluster(monkeypatch) -> int:
+    """A fresh process's view of Ray with ``RAY_ADDRESS`` naming a port nobody listens on
+    (where ``auto`` then looks); the port."""
     ray = pytest.importorskip("ray")
     monkeypatch.setattr(ray, "is_initialized", lambda: False)   # as in a fresh process
     with socket.socket() as s:                                  # a port nobody listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")      # where "auto" then looks
+    return port
+
+
+def test_ray_address_without_cluster_is_one_clear_line(no_ray_cluster, capsys):
+    """No cluster at the address: a ValueError of one line saying how to start one, at once
+    (Ray alone would retry for 30 s to minutes), and exit status 2 from ``abb-gym``."""
+    port = no_ray_cluster
     for address in ("auto", f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
         with pytest.raises(RayConnectionError) as err:
             run_tasks(toy_task, [ToyTask(1)], ray_address=address, progress=False)
@@ -402,6 +446,17 @@ def test_ray_address_without_cluster_is_one_clear_line(monkeypatch, capsys):
     assert main(argv) == 2
     err_lines = capsys.readouterr().err.strip().splitlines()
     assert len(err_lines) == 1 and "no Ray cluster found at 'auto'" in err_lines[0]
+
+
+def test_no_progress_bar_before_the_ray_backend_is_up(no_ray_cluster, capsys, tmp_path):
+    """``stability-map --ray-address auto`` without a cluster: its one error line, and no
+    progress bar drawn before it (the bar starts once the backend is connected)."""
+    from abb_gym.cli import main
+    assert main(["stability-map", "--nx", "2", "--ny", "2", "--ray-address", "auto",
+                 "--out", str(tmp_path / "map")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "stability map" not in err and "%" not in err, err
+    assert err.startswith("abb-gym stability-map: error: no Ray cluster found at 'auto'")
 
 
 def test_cli_stability_map_resume_dir(tmp_path):

@@ -190,3 +190,33 @@ def test_ray_tune_retries_a_crashed_trial(tmp_path):
                        storage_path=tmp_path / "tune")
     assert [t.metrics for t in tuned] == [t.metrics for t in local]
     assert len(list(tmp_path.glob("crashed-*"))) == 2
+
+
+def test_a_ray_instance_of_ray_true_listens_on_the_loopback_interface_only():
+    """``--ray`` starts a throw-away instance: none of its processes (GCS, raylet, workers,
+    agents, the driver's core worker) may accept connections from the network."""
+    import json
+    import subprocess
+    import sys
+    import textwrap
+    code = textwrap.dedent("""
+        import json, os
+        from abb_gym.execution.ray_backend import ensure_ray
+        ray = ensure_ray(None, 1)
+        assert ray.get(ray.remote(lambda: 7).remote()) == 7  # the instance works
+        import psutil  # Ray's own copy (ray/thirdparty_files), on the path once ray is imported
+        ours = {p.pid for p in psutil.Process().children(recursive=True)} | {os.getpid()}
+        listening = sorted({(c.laddr.ip, psutil.Process(c.pid).name())
+                            for c in psutil.net_connections(kind="inet")
+                            if c.status == psutil.CONN_LISTEN and c.pid in ours})
+        ray.shutdown()
+        print(json.dumps(listening))
+    """)
+    env = {k: v for k, v in __import__("os").environ.items() if k != "RAY_ADDRESS"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    listening = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert listening, "no listening socket found: the check would pass on nothing"
+    loopback = ("127.0.0.1", "::1", "::ffff:127.0.0.1")
+    assert [s for s in listening if s[0] not in loopback] == [], listening

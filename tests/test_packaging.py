@@ -108,7 +108,7 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     made = json.loads(_run([str(py), "-c", script], cwd=work, env=env).strip().splitlines()[-1])
     assert set(made["scenes"]) == {p.stem for p in (REPO / "configs" / "scenes").glob("*.yaml")}
     assert set(made["agents"]) == {p.name for p in (REPO / "agents" / "trained").iterdir()
-                                   if (p / "model.zip").exists()}
+                                   if (p / "agent.yml").exists()}
     assert len(made["ids"]) == 3
     # a fresh process finds the one-lane specialised kernels the wheel ships for the default
     # scene's speed and torque actions in the on-disk cache (abb_gym.kernels); DwellProfile

@@ -39,7 +39,7 @@ def test_a_scaled_residual_weight_keeps_the_other_weights():
 
 def test_training_section_has_every_agents_cost_and_curves(tmp_path):
     from abb_gym.plots import plot_training_curves
-    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "model.zip").exists())
+    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "agent.yml").exists())
     readme = tmp_path / "agents" / "README.md"
     readme.parent.mkdir()
     png = tmp_path / "agents" / "results" / "training_curves.png"

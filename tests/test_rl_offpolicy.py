@@ -44,7 +44,8 @@ def test_an_off_policy_agent_trains_loads_and_is_evaluated(algo, cls, policy, tm
     assert stored["_abb_gym"].get("algo") == (algo if policy == "MlpPolicy" else None)
     assert load_config(run / "config.yml").algo == algo
     pol = load_policy(run)
-    assert type(pol.model).__name__ == cls and not pol.recurrent
+    assert yaml.safe_load((run / "agent.yml").read_text())["algo"] == algo
+    assert not pol.recurrent and cls in type(pol.model.policy).__name__
     assert type(pol.model.policy).__name__ == policy.split(".")[-1].replace("MlpPolicy",
                                                                              f"{cls}Policy")
     result = evaluate(SPEED, "yoshida_odd", f"ppo:{run}", episodes=2, seed=0,

@@ -1,7 +1,7 @@
 """Every shipped agent in ``agents/trained/`` still loads and runs on the current environments.
 
-For each agent: the folder has model.zip, vecnormalize.pkl and config.yml; the saved
-observation and action spaces equal the environment's (built from the agent's ``config.yml``:
+For each agent: the folder has policy.safetensors, vecnormalize.json, config.yml and
+agent.yml (data, no pickle); the saved observation and action spaces equal the environment's (built from the agent's ``config.yml``:
 its environment id, scene and policy-relevant settings, on the test preset); the frozen policy
 runs a test episode end to end on that environment and on the default 10 ms control interval
 that ``abb-gym evaluate`` uses (action repeat), with finite actions in [-1, 1].
@@ -17,7 +17,7 @@ pytest.importorskip("torch")
 
 from abb_gym.rl import load_policy, make_native_env, run_episodes, trained_dir  # noqa: E402
 
-AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "model.zip").exists())
+AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "agent.yml").exists())
 
 
 SHIPPED = ("dwell_profile_yoshida_odd", "runup_speed_spannan_cfrp",
@@ -33,7 +33,7 @@ def test_agents_are_shipped():
 @pytest.mark.parametrize("name", AGENTS)
 def test_shipped_agent_loads_and_runs(name):
     folder = trained_dir() / name
-    for f in ("model.zip", "vecnormalize.pkl", "config.yml"):
+    for f in ("policy.safetensors", "vecnormalize.json", "config.yml", "agent.yml"):
         assert (folder / f).exists(), f
         assert (folder / f).stat().st_size < 1_000_000, f"{f} should be a small file"
     meta = yaml.safe_load((folder / "config.yml").read_text())["_run"]
@@ -47,7 +47,7 @@ def test_shipped_agent_loads_and_runs(name):
     assert pol.model.action_space.shape == env.single_action_space.shape
     np.testing.assert_array_equal(pol.model.action_space.low, env.single_action_space.low)
     np.testing.assert_array_equal(pol.model.action_space.high, env.single_action_space.high)
-    assert pol.vecnormalize.obs_rms.mean.shape == env.single_observation_space.shape
+    assert pol.vecnormalize.mean.shape == env.single_observation_space.shape
     obs, info = env.reset(seed=0)
     pol.reset(env, np.ones(2, bool))
     a = pol.act(obs, info)

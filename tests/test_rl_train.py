@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import pickle
 import tempfile
 from pathlib import Path
 
@@ -21,6 +20,7 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("torch")
 
 from abb_gym.cli import main as cli_main  # noqa: E402
+from abb_gym.envs.config import RewardWeights  # noqa: E402
 from abb_gym.evaluation.registry import resolve  # noqa: E402
 from abb_gym.rl import (PPOPolicy, load_config, load_policy, make_native_env,  # noqa: E402
                         run_episodes, summarise)
@@ -115,12 +115,15 @@ def test_config_file_errors(tmp_path):
 
 
 def test_smoke_run_writes_the_run_folder(smoke_run):
-    for name in ("model.zip", "vecnormalize.pkl", "config.yml", "evaluations.csv",
-                 "evaluations.npz", "evaluation.json", "best_model.zip",
-                 "best_vecnormalize.pkl", "agent.yml"):
+    for name in ("policy.safetensors", "optimizer.safetensors", "vecnormalize.json",
+                 "config.yml", "evaluations.csv", "evaluations.npz", "evaluation.json",
+                 "best_policy.safetensors", "best_vecnormalize.json", "agent.yml"):
         assert (smoke_run / name).exists(), name
-    assert list((smoke_run / "checkpoints").glob("ppo_*_steps.zip"))
-    assert list((smoke_run / "checkpoints").glob("ppo_vecnormalize_*_steps.pkl"))
+    # no pickle anywhere in the run folder, checkpoints included
+    assert not [p for p in smoke_run.rglob("*") if p.suffix in (".zip", ".pkl")]
+    checkpoints = list((smoke_run / "checkpoints").glob("ppo_*_steps"))
+    assert checkpoints and all((c / "policy.safetensors").is_file()
+                               and (c / "vecnormalize.json").is_file() for c in checkpoints)
     conf = yaml.safe_load((smoke_run / "config.yml").read_text())
     run = conf["_run"]
     assert run["env_id"] == SPEED and run["seed"] == 3
@@ -137,9 +140,14 @@ def test_smoke_run_writes_the_run_folder(smoke_run):
     assert zoo_problems(smoke_run / "config.yml") == []
     # the manifest fingerprints the final and the best model and statistics
     manifest = yaml.safe_load((smoke_run / "agent.yml").read_text())
-    assert set(manifest["files"]) == {"model.zip", "vecnormalize.pkl", "best_model.zip",
-                                      "best_vecnormalize.pkl"}
+    assert set(manifest["files"]) == {"policy.safetensors", "optimizer.safetensors",
+                                      "vecnormalize.json", "best_policy.safetensors",
+                                      "best_optimizer.safetensors", "best_vecnormalize.json"}
     assert manifest["env_id"] == SPEED and manifest["scene"] == "yoshida_odd"
+    assert manifest["action_kind"] == "speed" and manifest["algo"] == "ppo"
+    # the weights of its held-out evaluation: the test preset's with the config's residual
+    assert manifest["reward_weights"] == {**RewardWeights().__dict__,
+                                          **run["eval_env_kwargs"].get("reward", {})}
     best = load_policy(smoke_run, best=True)
     assert best.observation_names == manifest["observation"]["names"]
 
@@ -148,7 +156,7 @@ def test_load_policy_freezes_normalisation(smoke_run):
     pol = load_policy(smoke_run, env_id=SPEED)
     vn = pol.vecnormalize
     assert vn.training is False and vn.norm_reward is False
-    mean = vn.obs_rms.mean.copy()
+    mean = vn.mean.copy()
     env = make_native_env(SPEED, 2, dict(scene="yoshida_odd", preset="test",
                                          control_interval=0.05))
     obs, info = env.reset(seed=0)
@@ -157,10 +165,9 @@ def test_load_policy_freezes_normalisation(smoke_run):
         a = pol.act(obs, info)
         assert a.shape == (2, 1) and a.dtype == np.float32 and np.all(np.abs(a) <= 1)
         obs, *_ , info = env.step(a)
-    np.testing.assert_array_equal(vn.obs_rms.mean, mean)
-    with open(smoke_run / "vecnormalize.pkl", "rb") as fh:
-        saved = pickle.load(fh)
-    np.testing.assert_array_equal(saved.obs_rms.mean, mean)
+    np.testing.assert_array_equal(vn.mean, mean)
+    saved = json.loads((smoke_run / "vecnormalize.json").read_text())
+    np.testing.assert_array_equal(saved["obs_rms"]["mean"], mean)
     with pytest.raises(ValueError, match="trained on abb_gym/RunUpSpeed-v0"):
         load_policy(smoke_run, env_id="abb_gym/RunUpTorque-v0")
 

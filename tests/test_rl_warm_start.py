@@ -4,7 +4,7 @@ before any training."""
 from __future__ import annotations
 
 import copy
-import pickle
+import json
 
 import numpy as np
 import pytest
@@ -78,11 +78,11 @@ def test_bad_init_from_settings_name_the_field(value, match):
 
 @pytest.mark.parametrize("model", ["final", "best"])
 def test_the_model_starts_with_its_parents_weights_and_statistics(parent, model):
-    from stable_baselines3 import PPO
     prefix = "best_" if model == "best" else ""
     cfg = _config(parent, model)
     child, env, venv = _model_and_env(cfg)
-    want = PPO.load(parent / f"{prefix}model.zip", device="cpu").policy.state_dict()
+    from safetensors.torch import load_file
+    want = load_file(parent / f"{prefix}policy.safetensors")
     fresh = child.policy.state_dict()
     assert any(not np.array_equal(fresh[k].numpy(), want[k].numpy()) for k in want)
     files = warm_start_files(cfg.init_from, cfg.env_id, cfg.algo, venv.unwrapped.setup, True)
@@ -91,14 +91,21 @@ def test_the_model_starts_with_its_parents_weights_and_statistics(parent, model)
     assert set(got) == set(want)
     for key in want:
         np.testing.assert_array_equal(got[key].numpy(), want[key].numpy(), err_msg=key)
-    with open(parent / f"{prefix}vecnormalize.pkl", "rb") as fh:
-        stats = pickle.load(fh)
-    np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
-    np.testing.assert_array_equal(env.obs_rms.var, stats.obs_rms.var)
-    assert env.obs_rms is not stats.obs_rms and env.training  # a copy that keeps learning
+    stats = json.loads((parent / f"{prefix}vecnormalize.json").read_text())
+    np.testing.assert_array_equal(env.obs_rms.mean, stats["obs_rms"]["mean"])
+    np.testing.assert_array_equal(env.obs_rms.var, stats["obs_rms"]["var"])
+    np.testing.assert_array_equal(env.ret_rms.var, stats["ret_rms"]["var"])
+    assert env.training  # the statistics keep learning
+    # the optimiser continues from the parent's moments
+    from safetensors.torch import load_file
+    moments = load_file(parent / f"{prefix}optimizer.safetensors")
+    state = child.policy.optimizer.state_dict()["state"]
+    for key, value in moments.items():
+        _, pid, name = key.split(".", 2)
+        np.testing.assert_array_equal(state[int(pid)][name].numpy(), value.numpy(), err_msg=key)
     manifest = yaml.safe_load((parent / "agent.yml").read_text())
-    assert record == {"folder": str(parent), "model": f"{prefix}model.zip",
-                      "sha256": manifest["files"][f"{prefix}model.zip"]["sha256"]}
+    assert record == {"folder": str(parent), "model": f"{prefix}policy.safetensors",
+                      "sha256": manifest["files"][f"{prefix}policy.safetensors"]["sha256"]}
     env.close()
 
 
@@ -111,7 +118,8 @@ def test_a_warm_started_run_records_its_parent(parent, tmp_path):
     conf = yaml.safe_load((child / "config.yml").read_text())
     manifest = yaml.safe_load((parent / "agent.yml").read_text())
     assert conf["_abb_gym"]["init_from"] == {"folder": str(parent), "model": "best"}
-    assert conf["_run"]["init_from"]["sha256"] == manifest["files"]["best_model.zip"]["sha256"]
+    assert conf["_run"]["init_from"]["sha256"] == \
+        manifest["files"]["best_policy.safetensors"]["sha256"]
     # the run's config.yml trains again as it is
     assert TrainConfig.from_mapping(SPEED, conf[SPEED], "", conf["_abb_gym"]).init_from == \
         {"folder": str(parent), "model": "best"}

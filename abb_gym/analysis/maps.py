@@ -35,6 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .._files import replacing, savefig
 from ..execution import Executor
 from ..physics.scene import Scene
 from .groups import GROUP_FIELDS, MAX_BALLS, Groups
@@ -111,7 +112,7 @@ class StabilityMap:
         """One row per (y, x, n_balls): the classification fields of the module docstring."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "w", newline="") as fh:
+        with replacing(path, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow([self.x_name, self.y_name, "n_balls", *MAP_FIELDS])
             for iy, yv in enumerate(self.y_values):
@@ -159,7 +160,7 @@ class StabilityMap:
         ax.set_title(title or f"Balanced-state stability ({self.base_description})", fontsize=9)
         ax.legend(handles=handles, fontsize=7, loc="best")
         fig.tight_layout()
-        fig.savefig(path)
+        path = savefig(fig, path)
         plt.close(fig)
         return path
 

@@ -368,11 +368,15 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
     # before any candidate runs: every input a task will use (a bad one is one error), and
     # the file the result goes to
     check_inputs(env_id, scene_name, preset, seed, **(env_kwargs or {}))
+    from ..physics.scene import load_scene
+    # the file is named after the scene's name, which `baseline:NAME` looks up, not after the
+    # argument: a path argument "dir/my.yaml" made "my.yaml.yaml", which nothing found
+    name = load_scene(scene_name).name
     if out is not None:
-        check_tuned_path(tuned_path(out, scene_name), force)
+        check_tuned_path(tuned_path(out, name), force)
     scales = search_scales(scene_name, env_id, preset)
     result: dict[str, Any] = {
-        "scene": scene_name, "env": env_id, "preset": preset,
+        "scene": name, "env": env_id, "preset": preset,
         "env_kwargs": dict(env_kwargs or {}), "episodes": episodes,
         "seed": seed, "optimiser": _optimiser(cma.__version__, budget, restarts, start),
         "objective": OBJECTIVE, "families": {}}
@@ -539,7 +543,8 @@ def write_tuned(result: dict[str, Any], path: str | Path, force: bool = False) -
     path.parent.mkdir(parents=True, exist_ok=True)
     header = ("# Tuned baseline parameters (abb-gym tune-baselines); SI units, rad/s, s,\n"
               "# rad/s^2.  Tuned on the training preset; evaluate on the test preset.\n")
-    path.write_text(header + yaml.safe_dump(result, sort_keys=False))
+    from .._files import write_text
+    write_text(path, header + yaml.safe_dump(result, sort_keys=False))
     return path
 
 

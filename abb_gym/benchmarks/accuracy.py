@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .._files import savefig
 from ..physics import MotorDrive, SimulationError, SpeedProfile, list_scenes, load_scene
 from ..physics import model as mdl
 from ..physics import simulate
@@ -259,6 +260,6 @@ def plot_work_precision(rows: list[dict], path: str | Path) -> Path:
     fig.suptitle("Work-precision: error against DOP853 (rtol 1e-12) at a 10 ms output interval")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    path = savefig(fig, path, dpi=100)
     plt.close(fig)
     return path

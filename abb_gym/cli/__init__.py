@@ -8,11 +8,16 @@ write the module and list it in ``SUBCOMMANDS``; it checks its output paths befo
 Failures are one line on stderr, never a traceback: bad input (``ValueError``) exits 2, a
 simulation that cannot continue (:class:`abb_gym.SimulationError`) or a file that cannot be
 written (``OSError``) exits 1.  A reader that closes stdout early (``abb-gym simulate --json |
-head``) ends the command quietly with 141, the status of a process killed by SIGPIPE.
+head``) ends the command quietly with 141, the status of a process killed by SIGPIPE.  Ctrl-C
+prints ``interrupted: N of M tasks stored; rerun the same command to resume`` (N and M over
+the whole command: :class:`abb_gym.execution.core.TaskTally`) and exits 130, the status of a
+process ended by SIGINT.  The output folders a command locked are released when it ends
+(:mod:`abb_gym.cli.outputs`).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import re
@@ -32,6 +37,7 @@ SUBCOMMANDS = [
     "abb_gym.cli.train",
     "abb_gym.cli.kernels",
     "abb_gym.cli.render",
+    "abb_gym.cli.convert",
 ]
 
 
@@ -111,6 +117,7 @@ def check_env_kwargs(env_kwargs: dict, option: str, allowed: tuple = ()) -> dict
 
 
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a writer killed by it
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what a shell reports for a command ended by Ctrl-C
 
 
 def _one_line(text: object) -> str:
@@ -134,6 +141,49 @@ def _silence_stdout() -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from ..execution.core import task_tally
+    from .outputs import release_locks
+    task_tally().reset()
+    try:
+        with _command_settings(args):
+            return _run(args)
+    except KeyboardInterrupt:  # Ctrl-C, also while the line below is printed
+        try:
+            print(f"abb-gym {args.command}: {task_tally().interrupted_message()}",
+                  file=sys.stderr)
+        except KeyboardInterrupt:
+            pass
+        return EXIT_INTERRUPTED
+    finally:
+        release_locks()
+
+
+@contextlib.contextmanager
+def _command_settings(args: argparse.Namespace):
+    """For the command's run: warnings as one line each (``abb-gym CMD: warning: ...``), and
+    ``--trust-pickle`` as the environment variable the agent loaders read, so that the
+    worker processes the command starts trust the same files."""
+    import warnings
+    from ..resources import TRUST_PICKLE_ENV as TRUST_ENV
+    saved_format, saved_trust = warnings.formatwarning, os.environ.get(TRUST_ENV)
+
+    def one_line(message, category, filename, lineno, line=None):
+        return f"abb-gym {args.command}: warning: {_one_line(message)}\n"
+
+    warnings.formatwarning = one_line
+    if getattr(args, "trust_pickle", False):
+        os.environ[TRUST_ENV] = "1"
+    try:
+        yield
+    finally:
+        warnings.formatwarning = saved_format
+        if saved_trust is None:
+            os.environ.pop(TRUST_ENV, None)
+        else:
+            os.environ[TRUST_ENV] = saved_trust
+
+
+def _run(args: argparse.Namespace) -> int:
     from ..physics import SimulationError
     try:
         from .. import resources

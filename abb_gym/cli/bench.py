@@ -7,6 +7,7 @@ import csv
 import sys
 from pathlib import Path
 
+from .._files import replacing, write_text
 from ..tables import markdown_lines, markdown_table
 from .outputs import output_folder
 
@@ -26,7 +27,7 @@ def register(sub) -> None:
 
 
 def _write_csv(rows, path: Path) -> None:
-    with open(path, "w", newline="") as fh:
+    with replacing(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -49,7 +50,7 @@ def run_accuracy(args) -> int:
             "free rotor\n\n" + markdown_table(drift) + "\n\n## float32 against float64, "
             "every scene (a run-up through the critical speed; bounds 1 % peak whirl, 1 deg)"
             "\n\n" + markdown_table(f32) + "\n")
-    (out / "accuracy.md").write_text(text)
+    write_text(out / "accuracy.md", text)
     print(text)
     print(f"wrote {png}, {out / 'work_precision.csv'}, {out / 'accuracy.md'}")
     return 0
@@ -72,6 +73,6 @@ def run_speed(args) -> int:
     for line in markdown_lines(measured(), COLUMNS):
         tqdm.write(line, file=sys.stdout)
         sys.stdout.flush()
-    (out / "speed.md").write_text(markdown_table(rows, COLUMNS) + "\n")
+    write_text(out / "speed.md", markdown_table(rows, COLUMNS) + "\n")
     print(f"wrote {out / 'speed.md'}")
     return 0

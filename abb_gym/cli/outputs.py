@@ -4,14 +4,27 @@ A command that computes for minutes and then cannot write its result wastes the 
 subcommand passes its output options through :func:`output_file` or :func:`output_folder`
 first.  Both create the missing folders (as ``--plot`` always did) and raise ``ValueError``
 (one line from ``abb-gym``) naming the option when the path cannot be written: a regular
-file where a folder must be, a folder where a file must be, or no write permission.
+file where a folder must be, a folder where a file must be, an empty name (which ``Path``
+reads as the current folder), or no write permission.
+
+A folder of reports (``--out`` of ``evaluate``, ``train``, ``study``, ``bench``, ``demo``) is
+locked for the command's run (:func:`output_folder`): a second command writing the same
+folder at the same time is refused in one line, instead of both finishing and the last one
+silently replacing the first one's reports.  The lock is ``flock`` on the folder itself, so no
+lock file is left in it and a killed command cannot leave a stale lock behind (the system
+drops it with the process); ``abb-gym`` releases it when the command ends
+(:func:`release_locks`).  Where ``flock`` does not exist (Windows) folders are not locked.
+The files themselves are written whole or not at all (:mod:`abb_gym._files`).
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-__all__ = ["output_file", "output_folder", "output_image"]
+__all__ = ["output_file", "output_folder", "output_image", "lock_folder", "release_locks"]
+
+#: locked output folders of the running command: real path -> the open descriptor holding it
+_LOCKS: dict[str, int] = {}
 
 
 def _blocking_file(path: Path) -> Path | None:
@@ -85,10 +98,45 @@ def output_file(path: str | os.PathLike, option: str) -> Path:
     return _checked(_file, path, option)
 
 
-def output_folder(path: str | os.PathLike, option: str) -> Path:
+def output_folder(path: str | os.PathLike, option: str, lock: bool = True) -> Path:
     """``path`` as a folder that files will be written into: created if missing; a regular
-    file there or above it, and an empty name (not the current folder), are refused."""
-    return _checked(_folder, path, option)
+    file there or above it, and an empty name (not the current folder), are refused.  With
+    ``lock`` (a folder of this command's reports) it is locked until the command ends
+    (:func:`lock_folder`)."""
+    folder = _checked(_folder, path, option)
+    if lock:
+        lock_folder(folder, option)
+    return folder
+
+
+def lock_folder(folder: str | os.PathLike, option: str) -> None:
+    """Hold an exclusive lock on ``folder`` until :func:`release_locks`; a ValueError naming
+    ``option`` if another process (or another command of this one) holds it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no flock (see the module docstring)
+        return
+    key = os.path.realpath(folder)
+    if key in _LOCKS:
+        return
+    fd = os.open(key, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise ValueError(f"{option} {str(folder)!r} is being written by another abb-gym "
+                         f"command; wait until it has finished, or write elsewhere") from None
+    _LOCKS[key] = fd
+
+
+def release_locks() -> None:
+    """Release every folder lock this process holds (the end of a command)."""
+    while _LOCKS:
+        _, fd = _LOCKS.popitem()
+        try:
+            os.close(fd)  # closing the descriptor drops its flock
+        except OSError:
+            pass
 
 
 def output_image(path: str | os.PathLike, option: str) -> Path:

@@ -40,6 +40,8 @@ def register(sub) -> None:
                    help="one frame per N control steps (default: real time at --fps)")
     p.add_argument("--steps", type=int, default=None, metavar="N",
                    help="stop the episode after N control steps (default: the whole episode)")
+    from .evaluate import add_trust_argument
+    add_trust_argument(p)
     p.set_defaults(func=run)
 
 
@@ -51,7 +53,10 @@ def default_out(scene: str, policy: str, episode: int) -> str:
 def run(args) -> int:
     from ..evaluation.video import check_video, render_episode
     from .outputs import output_file
-    out = args.out or default_out(args.scene, args.policy, args.episode)
+    if args.out is not None and not args.out.strip():  # not read as "the default path"
+        raise ValueError(f"--out must be a video file path (got {args.out!r})")
+    out = args.out if args.out is not None else default_out(args.scene, args.policy,
+                                                            args.episode)
     check_video(out, args.fps)  # suffix, fps and the extra before any folder is made
     output_file(out, "--out")
     if tasks.get(args.env).one_step:

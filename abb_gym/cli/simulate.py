@@ -171,6 +171,7 @@ def run(args) -> int:
         print()
         return 0
     if args.json is not None:
-        tr.to_json(args.json)
+        from .._files import write_text
+        write_text(args.json, tr.to_json())
     print(markdown_table([tr.summary()]))
     return 0

@@ -27,8 +27,8 @@ def run(args) -> int:
     # the inputs first: a bad scene is one line before any folder or task exists (the study
     # functions check their points again before they dispatch)
     load_scene(args.scene)
-    out = output_folder(args.out, "--out")
     ex = _executor(args)
+    out = output_folder(args.out, "--out")
     if args.which == "settling":
         rows = studies.settling_study(args.scene, executor=ex)
         png = studies.plot_settling_study(rows, out / "settling_period.png")
@@ -36,7 +36,8 @@ def run(args) -> int:
         rows = studies.ball_position_study(args.scene, executor=ex)
         png = studies.plot_ball_position_study(rows, out / "ball_position.png")
     text = markdown_table(rows)
-    (out / f"{args.which}.md").write_text(text + "\n")
+    from .._files import write_text
+    write_text(out / f"{args.which}.md", text + "\n")
     print(text)
     print(f"wrote {png} and {png.with_suffix('.csv')}")
     return 0

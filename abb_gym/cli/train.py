@@ -5,8 +5,9 @@
     abb-gym train --config runs/x/config.yml --hyperparams learning_rate=1e-4 \\
         --env-kwargs 'reward={residual: 5}' --out runs/x_lr1e-4
 
-Each run writes a folder (default ``runs/<config>/s<seed>-<time>``) with ``model.zip``,
-``vecnormalize.pkl``, ``config.yml``, the test-set evaluations and checkpoints, and prints its
+Each run writes a folder (default ``runs/<config>/s<seed>-<time>``) with
+``policy.safetensors``, ``vecnormalize.json``, ``config.yml``, ``agent.yml``, the test-set
+evaluations and checkpoints (data only: no pickle, :mod:`abb_gym.rl.agent_files`), and prints its
 wall time and env-steps/s (see :mod:`abb_gym.rl.train`).  Needs the training extra
 (``pip install -c constraints.txt 'abb-gym[train]'``); the options are defined here so that
 ``abb-gym --help`` works without it.
@@ -55,6 +56,11 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                    help="start from the best model (and statistics) of this agent folder, "
                         "e.g. an earlier run (the config's _abb_gym init_from; see "
                         "abb_gym.rl.warm_start)")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="let --init-from read an agent folder of pickles (model.zip, "
+                        "vecnormalize.pkl), which run any code they contain: only one you "
+                        "trust (also $ABB_GYM_TRUST_PICKLE=1); abb-gym convert-agent converts "
+                        "it once for good")
     p.add_argument("--tensorboard-log", "-tb", default=None, metavar="DIR",
                    help="write TensorBoard event files to DIR (SB3's tensorboard_log)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -123,7 +129,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     if args.out is not None:  # "" is refused, not read as "no --out" (nor as ".")
         output_folder(args.out, "--out")
     if args.tensorboard_log is not None:
-        output_folder(args.tensorboard_log, "--tensorboard-log")
+        output_folder(args.tensorboard_log, "--tensorboard-log", lock=False)
     if args.seeds is None:
         res = train(cfg, seed=args.seed, run_dir=args.out, progress=not args.no_progress,
                     verbose=args.verbose, tensorboard_log=args.tensorboard_log)
@@ -172,8 +178,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = ArgumentParser(prog="train", description=__doc__.split("\n")[0])
     add_train_arguments(p)
     args = p.parse_args(argv)
+    args.command = "train"
+    from . import _command_settings
     try:
-        return run(args)
+        with _command_settings(args):
+            return run(args)
     except ValueError as exc:
         print(f"train: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("train: interrupted", file=sys.stderr)
+        return 130

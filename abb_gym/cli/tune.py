@@ -6,7 +6,8 @@ folder).  ``baseline:NAME`` policies use a ``baselines/<scene>.yaml`` of a confi
     abb-gym tune-baselines --scene yoshida_odd --out my_configs/baselines
     abb-gym --configs my_configs evaluate --scene yoshida_odd --policy baseline:speed_dwell
 
-An existing file is replaced only with ``--force``.
+The file is named after the scene's ``name`` (the name ``baseline:NAME`` looks it up by),
+also when ``--scene`` is a YAML path.  An existing file is replaced only with ``--force``.
 """
 from __future__ import annotations
 
@@ -91,25 +92,26 @@ def run(args) -> int:
     from ..configuration import parse_assignments
     from ..evaluation.evaluate import check_inputs
     from . import check_env_kwargs
-    load_scene(args.scene)
+    scene_name = load_scene(args.scene).name  # the tuned file's name (tuner.tuned_path)
     env_kwargs = check_env_kwargs(parse_assignments(args.env_kwargs, "--env-kwargs"),
                                   "--env-kwargs")
     # the environment every task makes, once here (preset, keywords, stiffness)
     check_inputs(args.env, args.scene, args.preset, args.seed, **env_kwargs)
     _check_episode_memory(args, env_kwargs)
+    executor = _executor(args)  # its options checked before any file or folder is made
     if args.out is not None and not args.out.strip():  # not read as "no --out"
         raise ValueError(f"--out must be a file or folder path (got {args.out!r})")
-    out = None if args.dry_run else (f"baselines/{args.scene}.yaml" if args.out is None
+    out = None if args.dry_run else (f"baselines/{scene_name}.yaml" if args.out is None
                                      else args.out)
     if out is not None:
         from .outputs import output_file
-        target = tuned_path(out, args.scene)
+        target = tuned_path(out, scene_name)
         check_tuned_path(target, args.force)
         output_file(target, "--out")
     families = tuple(args.family or FAMILIES)
-    start = _tuned_starts(args.scene, families) if args.from_tuned else None
+    start = _tuned_starts(scene_name, families) if args.from_tuned else None
     result = tune(args.scene, families, args.budget, args.episodes,
-                  args.seed, args.preset, _executor(args), out=out, force=args.force,
+                  args.seed, args.preset, executor, out=out, force=args.force,
                   popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs,
                   restarts=args.restarts, start=start)
     print(yaml.safe_dump(result, sort_keys=False))

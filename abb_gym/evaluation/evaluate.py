@@ -83,6 +83,9 @@ class EvaluationResult:
     episodes: list[dict] = field(default_factory=list)
     rollouts: dict[int, Rollout] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)  # the policy's parameters, if any
+    # the resolved reward weights of the test set, and where they came from
+    reward_weights: dict[str, float] = field(default_factory=dict)
+    reward_source: str = ""
 
     def summary(self) -> dict[str, Any]:
         return summarise(self.episodes)
@@ -296,9 +299,16 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     checked before any chunk runs (:func:`check_inputs`).  On DwellProfile, a baseline its
     action cannot express runs on RunUpSpeed, on the same machines (:func:`policy_env_id`);
     the result's ``env_id`` says where it ran.  The environments carry the keywords the policy
-    needs (:func:`policy_env_kwargs`: a trained agent's observation settings)."""
+    needs (:func:`policy_env_kwargs`: a trained agent's observation settings) and, unless
+    ``env_kwargs`` sets a ``reward``, the reward weights a trained agent was evaluated with
+    when it was trained (``policy.reward_weights``); the result records the weights."""
     inner = check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
+    source = "env_kwargs" if "reward" in env_kwargs else f"preset {preset}"
     env_kwargs = {**_needs(inner), **env_kwargs}
+    recorded = getattr(inner, "reward_weights", None)
+    if "reward" not in env_kwargs and recorded:
+        env_kwargs["reward"] = dict(recorded)
+        source = f"recorded with {policy}"
     env_id = _env_for(inner, env_id, scene, preset, env_kwargs)
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
@@ -307,7 +317,9 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
                                                   disable=len(tasks) < 2)]
     else:
         parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
-    result = EvaluationResult(policy, env_id, scene, preset, seed)
+    result = EvaluationResult(policy, env_id, scene, preset, seed,
+                              reward_weights=reward_weights(env_id, scene, preset, **env_kwargs),
+                              reward_source=source)
     for eps, rolls, params in parts:
         result.episodes.extend(eps)
         result.rollouts.update(rolls)
@@ -315,6 +327,17 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     if result.episodes:
         result.policy = result.episodes[0]["policy"]
     return result
+
+
+def reward_weights(env_id: str, scene: Any, preset: str = "test", **env_kwargs: Any
+                   ) -> dict[str, float]:
+    """The reward weights an environment of these arguments uses (the preset's, with
+    ``env_kwargs["reward"]`` over them)."""
+    env = make_env(env_id, scene, preset, 1, **env_kwargs)
+    try:
+        return dict(env.unwrapped.setup.config.to_dict()["reward"])
+    finally:
+        env.close()
 
 
 def summarise(episodes: list[dict]) -> dict[str, Any]:

@@ -29,6 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .._files import replacing_together, savefig
 from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
 from .replay import feedback_value, paired_by_episode
@@ -66,6 +67,13 @@ def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEA
         row.update({f"{k} [{unit(k, results)}]": cell(s[k]) for k in keys})
         rows.append(row)
     return markdown_table(rows)
+
+
+def reward_line(result: EvaluationResult) -> str:
+    """The reward weights the returns of ``result`` were computed with, in one line."""
+    weights = ", ".join(f"{k} {v:g}" for k, v in result.reward_weights.items())
+    source = f" ({result.reward_source})" if result.reward_source else ""
+    return f"Reward weights{source}: {weights}."
 
 
 def base_name(policy: str) -> str:
@@ -129,6 +137,8 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
             f"seed {first.seed}: {len(first.episodes)} episodes per policy, mean [95 % CI].  "
             f"at_speed: share of episodes that completed the run-up (an unbroken settling "
             f"window in the operating band); residual_vibration over those.\n\n")
+    if first.reward_weights:
+        head += reward_line(first) + "\n\n"
     if len({r.env_id for r in results}) > 1:
         head += ("Column env: the baselines that DwellProfile's one action cannot express "
                  "ran on RunUpSpeed, on the same machines (same preset and seeds).\n\n")
@@ -138,26 +148,35 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         text += ("\nFeedback value (paired over the same episodes; positive residual and "
                  "run-up time differences, and negative return differences, mean the policy "
                  "beats its own open-loop replay):\n\n" + feedback_table(feedback) + "\n")
-    paths["summary"].write_text(text)
     rows = [e for r in results for e in r.episodes]
-    with open(paths["episodes"], "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
-               "seed": first.seed, "metrics": {k: unit(k, results) for k in METRICS},
+               "seed": first.seed, "reward_weights": first.reward_weights,
+               "reward_source": first.reward_source,
+               "metrics": {k: unit(k, results) for k in METRICS},
                "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
                "feedback_value": feedback, "sweep": sweep or []}
-    paths["json"].write_text(json.dumps(payload, indent=1, default=_json_default))
     recorded = [(r.policy, r.rollouts[min(r.rollouts)]) for r in results if r.rollouts]
-    if recorded:
-        from ..plots import plot_runup_comparison
-        paths["timeseries"] = plot_runup_comparison(
-            dict(recorded), out / "timeseries.png",
-            f"{first.scene}: policies on test episode {min(results[0].rollouts)}")
-    paths["pareto"] = plot_pareto(results, sweep or [], out / "pareto.png")
-    paths["balance"] = plot_pareto(results, [], out / "balance.png", BALANCE_AXES)
+    # every file beside its target first, then all renamed: a failure half-way leaves the
+    # previous report as it was
+    with replacing_together() as files:
+        files.path(paths["summary"]).write_text(text)
+        with open(files.path(paths["episodes"]), "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        files.path(paths["json"]).write_text(json.dumps(payload, indent=1,
+                                                        default=_json_default))
+        if recorded:
+            from ..plots import plot_runup_comparison
+            paths["timeseries"] = out / "timeseries.png"
+            plot_runup_comparison(
+                dict(recorded), files.path(paths["timeseries"]),
+                f"{first.scene}: policies on test episode {min(results[0].rollouts)}")
+        paths["pareto"] = out / "pareto.png"
+        plot_pareto(results, sweep or [], files.path(paths["pareto"]))
+        paths["balance"] = out / "balance.png"
+        plot_pareto(results, [], files.path(paths["balance"]), BALANCE_AXES)
     return paths
 
 
@@ -271,8 +290,7 @@ def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path,
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
+    path = savefig(fig, path, dpi=110)
     plt.close(fig)
     return path
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .._files import replacing, savefig
 from ..physics import SpeedProfile, load_scene, simulate
 
 ACCEL = 40.0  # rad/s^2, Yoshida's run-up rate
@@ -115,7 +116,7 @@ def write_csv(rows: list[dict], path) -> Path:
         raise ValueError("a study without rows has nothing to write")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with replacing(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -127,7 +128,7 @@ def _save(fig, rows: list[dict], path) -> Path:
     import matplotlib.pyplot as plt
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    path = savefig(fig, path, dpi=110)
     plt.close(fig)
     write_csv(rows, path.with_suffix(".csv"))
     return path

@@ -89,7 +89,10 @@ Failures, retries and resume
   process, the worker's traceback is its ``__cause__``.  An exception that cannot travel
   between processes arrives as a plain ValueError / TypeError with the same message.
 * Ctrl-C raises :class:`~.errors.SweepInterrupted`, a KeyboardInterrupt whose one-line message
-  says how many tasks finished and how to resume (``done``, ``total``, ``store``).
+  says how many tasks finished and how to resume (``done``, ``total``, ``store``).  ``abb-gym``
+  prints instead the tally of the whole command, whose sweeps may be many
+  (:class:`~.core.TaskTally`: ``interrupted: N of M tasks stored; rerun the same command to
+  resume``), and exits 130.
 * However a sweep stops (a failed task, bad input, Ctrl-C), the tasks in flight have ended
   before the exception reaches the caller: nothing computes on behind its back, and a sweep
   started next (e.g. the resumed one, in the same Ray session) starts clean.  Local workers are

@@ -15,9 +15,45 @@ from .errors import SweepInterrupted, TaskFailed
 from .ids import function_name, task_id, task_seed
 from .store import ResultStore
 
-__all__ = ["Executor", "run_tasks", "default_workers"]
+__all__ = ["Executor", "run_tasks", "default_workers", "TaskTally", "task_tally"]
 
 _MAX_AUTO_CHUNK = 32
+
+
+class TaskTally:
+    """The tasks of one command, over all its sweeps: ``seen`` (ids of the tasks it asked
+    for) and ``stored`` (those whose result is in a store, loaded or newly written).
+
+    Why one tally for the command and not per sweep: ``evaluate`` runs one sweep per policy
+    and the tuner one per CMA-ES generation, so "0 of 1 tasks finished" of the sweep that
+    Ctrl-C hit said nothing about the results the command had stored before it.
+    ``abb-gym`` starts a tally per command (:meth:`reset`) and reports it on Ctrl-C."""
+
+    def __init__(self) -> None:
+        self.seen: set[str] = set()
+        self.stored: set[str] = set()
+        self.stores: set[str] = set()  # the store directories used
+
+    def reset(self) -> None:
+        self.seen.clear()
+        self.stored.clear()
+        self.stores.clear()
+
+    def interrupted_message(self) -> str:
+        """The line ``abb-gym`` prints when Ctrl-C stops the command."""
+        if not self.stores:
+            return ("interrupted: nothing was stored (rerun with --resume-dir DIR to keep "
+                    "finished tasks, so that a rerun resumes)")
+        return (f"interrupted: {len(self.stored)} of {len(self.seen)} tasks stored; rerun the "
+                f"same command to resume")
+
+
+_TALLY = TaskTally()
+
+
+def task_tally() -> TaskTally:
+    """The tally of this process's command (see :class:`TaskTally`)."""
+    return _TALLY
 
 
 def default_workers() -> int:
@@ -183,15 +219,24 @@ class Executor:
         results: list[Any] = [None] * n
         done = [False] * n
         jobs = []
+        _TALLY.seen.update(groups)
+        if store is not None:
+            _TALLY.stores.add(str(store.directory))
         for tid, idxs in groups.items():
             if store is not None:
-                ok, value = store.load(tid)
+                ok, value = store.load(tid, function_name(fn))
                 if ok:
+                    _TALLY.stored.add(tid)
                     for j in idxs:
                         results[j], done[j] = value, True
                     continue
             jobs.append((idxs[0], tasks[idxs[0]], seeds[idxs[0]]))
 
+        if jobs and self.mode == "ray":
+            # connect first: a bar drawn before "no Ray cluster found" is noise around the
+            # one line the user needs
+            from .ray_backend import ensure_ray
+            ensure_ray(self.ray_address, self.workers, self.runtime_env)
         from tqdm.auto import tqdm
         bar = tqdm(total=n, initial=sum(done), desc=desc, unit="task",
                    disable=not self.progress, dynamic_ncols=True)
@@ -201,7 +246,9 @@ class Executor:
                 return
             tid = ids[index]
             if store is not None:
-                store.save(tid, value)  # before it counts as done: a crash now loses nothing
+                # before it counts as done: a crash now loses nothing
+                store.save(tid, value, function_name(fn))
+                _TALLY.stored.add(tid)
             for j in groups[tid]:
                 results[j], done[j] = value, True
             bar.update(len(groups[tid]))

@@ -32,6 +32,7 @@ A second Ctrl-C while waiting kills at once.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import time
@@ -124,8 +125,44 @@ def ensure_ray(address: str | None = None, num_cpus: int | None = None,
         # address="local": always a new instance, never a cluster that `ray start` left
         # behind (use ray_address="auto" for that); no dashboard for a throw-away instance:
         # it costs start-up time and memory
-        ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, **kwargs)
+        with _loopback_only(ray):
+            ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, **kwargs)
     return ray
+
+
+#: Ray's switch (read when Ray is imported, and by the processes it starts) that makes a node
+#: take the loopback address as its own, as Ray does by default on macOS and Windows
+_LOOPBACK_SWITCH = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+@contextlib.contextmanager
+def _loopback_only(ray):
+    """Start a local instance whose processes listen on 127.0.0.1 only.
+
+    Why: on Linux, Ray's core processes (GCS, raylet, workers, agents) listen on every
+    network interface, so a throw-away instance of one sweep would accept connections from
+    the whole network.  A node whose own address is the loopback address binds its servers
+    there; Ray does this where it does not support clusters (macOS, Windows), switched by
+    :data:`_LOOPBACK_SWITCH`.  The switch is set for the processes the instance starts and,
+    in this process, for the start only (the driver keeps the node's address afterwards).
+    Reachable from other machines, on purpose: start the cluster yourself (``ray start
+    --head``, with Ray's own address options) and pass ``--ray-address``.
+    """
+    import importlib
+    constants = importlib.import_module("ray._private.ray_constants")
+    saved_env = os.environ.get(_LOOPBACK_SWITCH)
+    saved_flag = getattr(constants, "ENABLE_RAY_CLUSTER", None)
+    os.environ[_LOOPBACK_SWITCH] = "0"
+    constants.ENABLE_RAY_CLUSTER = False
+    try:
+        yield
+    finally:
+        if saved_env is None:
+            os.environ.pop(_LOOPBACK_SWITCH, None)
+        else:
+            os.environ[_LOOPBACK_SWITCH] = saved_env
+        if saved_flag is not None:
+            constants.ENABLE_RAY_CLUSTER = saved_flag
 
 
 def ray_cpus(ray) -> int:

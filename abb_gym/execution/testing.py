@@ -142,11 +142,11 @@ def ctrl_c_after_saves(n_saved: int):
 
     save, pressed = ResultStore.save, []
 
-    def interrupted_save(self, tid, result):
+    def interrupted_save(self, tid, result, *args, **kwargs):
         if not pressed and len(self) >= n_saved:
             pressed.append(True)
             raise KeyboardInterrupt
-        return save(self, tid, result)
+        return save(self, tid, result, *args, **kwargs)
 
     ResultStore.save = interrupted_save
     try:

@@ -1,23 +1,29 @@
-"""Trained PPO agents as evaluation policies, with frozen normalisation.
+"""Trained agents as evaluation policies, with frozen normalisation.
 
-:func:`load_policy` reads a run folder (or a shipped agent in ``agents/trained/<name>``)::
+:func:`load_policy` reads an agent folder (a run folder of ``abb-gym train``, or a shipped
+agent in ``agents/trained/<name>``)::
 
     run/
-      model.zip          SB3 PPO model
-      vecnormalize.pkl   VecNormalize statistics (absent if the run did not normalise)
-      config.yml         the training config (zoo style, keyed by the env id) and, under
-                         ``_run``, the env id, seed and the agent's policy-relevant
-                         environment settings (``policy_env``)
-      agent.yml          the manifest: fingerprints of the files and what the normalisation
-                         was fitted on (env id, scene, observation layout)
+      policy.safetensors   the network (weights, class, keywords, spaces; no pickle)
+      vecnormalize.json    observation statistics (absent if the run did not normalise)
+      config.yml           the training config (zoo style, keyed by the env id) and, under
+                           ``_run``, the env id, seed and the agent's policy-relevant
+                           environment settings (``policy_env``)
+      agent.yml            the manifest: env id, action kind, observation layout, reward
+                           weights, and the fingerprints of the files
 
 checks that the folder is complete and self-consistent (:mod:`abb_gym.rl.agent_files`: a
 missing, foreign or corrupt file is one :class:`~abb_gym.rl.agent_files.AgentError` naming
-it) and returns a :class:`PPOPolicy`, which implements the evaluation ``Policy`` protocol of
+it; a network made for another env id or action kind is refused by name) and returns a
+:class:`PPOPolicy`, which implements the evaluation ``Policy`` protocol of
 :mod:`abb_gym.evaluation.registry` (``reset(env, mask)``, ``act(obs, info)``) on a native
-vector environment.  The VecNormalize statistics are frozen (``training=False,
-norm_reward=False``): evaluation never updates them.  Actions are the deterministic policy
-mean unless ``deterministic=False``.
+vector environment.  Nothing is unpickled.  The statistics are frozen: evaluation never
+updates them.  Actions are the deterministic policy mean unless ``deterministic=False``.
+
+Pickled agents (abb-gym's first format with ``model.zip`` and ``vecnormalize.pkl``, a plain
+SB3 ``model.zip``, an rl_zoo3 run folder: :mod:`abb_gym.rl.legacy`) load only when trusted
+explicitly (``trust_pickle=True``, ``--trust-pickle`` or ``ABB_GYM_TRUST_PICKLE=1``);
+otherwise one line refuses them and names ``abb-gym convert-agent``, which converts them once.
 
 A recurrent agent (sb3-contrib's ``RecurrentPPO``, an LSTM policy) keeps one memory per
 sub-environment: ``reset(env, mask)`` starts it afresh for the sub-environments in ``mask``,
@@ -33,7 +39,9 @@ hold; a mismatch raises ``ValueError`` naming the field.  ``policy.env_kwargs`` 
 ``gym.make_vec`` keywords the agent needs besides ``scene`` and ``preset`` (e.g.
 ``{"observe_balls": True}``, and the observation's preset fields ``sync_vibration`` and
 ``frame_stack`` it was trained with); :func:`abb_gym.evaluation.evaluate.evaluate` builds the
-agent's environments with them.
+agent's environments with them.  ``policy.reward_weights`` are the weights the agent was
+evaluated with when it was trained (``agent.yml``), with which ``evaluate`` scores it unless
+told otherwise.
 """
 from __future__ import annotations
 
@@ -54,25 +62,27 @@ def trained_dir() -> Path:
 
 
 def resolve_agent_path(path: str | Path) -> Path:
-    """A run folder from a path (folder or its ``model.zip``) or an agent's name on the search
-    path of :mod:`abb_gym.resources` (user folders first, then the shipped agents)."""
+    """An agent folder (or, for a pickled model, its ``.zip``) from a path or an agent's
+    name on the search path of :mod:`abb_gym.resources` (user folders first, then the shipped
+    agents)."""
     from .. import resources
-    from .agent_files import AgentError
+    from .legacy import find_pickled
     p = Path(path)
     if p.is_file() and p.suffix == ".zip":
+        return p
+    if p.is_file() and p.suffix == ".safetensors":
         p = p.parent
-    if not (p / "model.zip").is_file():
-        found = resources.find("agents", str(path))
-        if found is not None:
-            p = found
-    if not (p / "model.zip").is_file():
-        if p.is_dir() and (p / "config.yml").exists():  # an agent folder with a bad model
-            what = "is a directory" if (p / "model.zip").is_dir() else "is missing"
-            raise AgentError(f"agent file {str(p / 'model.zip')!r} {what} (the PPO model)")
-        raise ValueError(f"no PPO agent at {str(path)!r}: expected a folder with model.zip "
-                         f"(a run folder) or an agent name, one of "
-                         f"{resources.names('agents')}")
-    return p
+    if p.is_dir() and (resources.is_agent_folder(p) or find_pickled(p) is not None):
+        return p
+    found = resources.find("agents", str(path))
+    if found is not None:
+        return found
+    if p.is_dir() and (p / "config.yml").exists():  # an agent folder without its manifest
+        from .agent_files import check_folder
+        check_folder(p)  # the AgentError that names what is missing
+    raise ValueError(f"no PPO agent at {str(path)!r}: expected an agent folder (agent.yml, "
+                     f"policy.safetensors), a model.zip or rl_zoo3 run folder (pickles: "
+                     f"--trust-pickle), or an agent name, one of {resources.names('agents')}")
 
 
 class PPOPolicy:
@@ -86,13 +96,16 @@ class PPOPolicy:
     :param deterministic: use the policy mean.
     :param observation_names: the observation layout the agent was trained on (its
         ``agent.yml``), checked against the environment's; None: not checked.
+    :param reward_weights: the reward weights of the agent's own evaluation (``agent.yml``),
+        or None (a model that records none).
     """
 
     reads_info = False  # the evaluation's hint: the agent sees the observation only
 
     def __init__(self, model: Any, vecnormalize: Any = None, config: dict | None = None,
                  name: str = "ppo", deterministic: bool = True,
-                 observation_names: list[str] | None = None):
+                 observation_names: list[str] | None = None,
+                 reward_weights: dict[str, float] | None = None):
         self.model = model
         self.vecnormalize = vecnormalize
         if vecnormalize is not None:
@@ -106,6 +119,7 @@ class PPOPolicy:
         self.env_id = self.config.get("env_id")
         self.policy_env: dict[str, Any] = dict(self.config.get("policy_env") or {})
         self.env_kwargs: dict[str, Any] = observation_kwargs(self.policy_env)
+        self.reward_weights = dict(reward_weights) if reward_weights is not None else None
         self._repeat = 1
         self._single = False
         self._count: np.ndarray | None = None
@@ -227,41 +241,80 @@ class PPOPolicy:
 
 
 def load_policy(path: str | Path, env_id: str | None = None, scene: Any = None, *,
-                deterministic: bool = True, best: bool = False, name: str | None = None
-                ) -> PPOPolicy:
-    """Load a trained agent as an evaluation policy with frozen VecNormalize statistics.
+                deterministic: bool = True, best: bool = False, name: str | None = None,
+                trust_pickle: bool | None = None) -> PPOPolicy:
+    """Load a trained agent as an evaluation policy with frozen normalisation statistics.
 
-    :param path: run folder, its ``model.zip``, or a shipped agent's name
-        (``agents/trained/<name>``).
-    :param env_id: if given, must equal the id the agent was trained on.
+    :param path: agent folder, or a shipped agent's name (``agents/trained/<name>``); a
+        pickled agent (``model.zip``, an rl_zoo3 run folder) only when trusted.
+    :param env_id: if given, must equal the id the agent was trained on (a plain SB3
+        ``model.zip``, which records none, is taken to be of this id).
     :param scene: if given and different from the training scene, a warning is issued (the
         agent still runs: its observations are normalised per machine).
-    :param best: load ``best_model.zip`` / ``best_vecnormalize.pkl`` (best evaluation) instead
-        of the final model.
+    :param best: load the best model during training (``best_policy.safetensors``,
+        ``best_vecnormalize.json``) instead of the final one.
+    :param trust_pickle: load pickled files (they can run code); None: as the environment
+        variable ``ABB_GYM_TRUST_PICKLE`` says (:func:`~abb_gym.rl.agent_files.pickle_trusted`).
     """
-    from .agent_files import check_folder, custom_objects_for, load_model, load_vecnormalize
+    from .legacy import find_pickled
 
-    folder = resolve_agent_path(path)
-    files = check_folder(folder, best=best)
-    config = files.run
-    trained_id = files.env_id
-    if env_id is not None and env_id != trained_id:
-        raise ValueError(f"agent {str(folder)!r} was trained on {trained_id}, not {env_id}")
+    target = resolve_agent_path(path)
+    pickled = find_pickled(target, best=best)
+    if pickled is not None:
+        return _load_pickled_policy(pickled, target, env_id, scene, deterministic, best, name,
+                                    trust_pickle)
+    from .agent_files import AgentError, check_folder
+    from .policy_files import LoadedModel, load_normalization, load_policy_file
+
+    files = check_folder(target, best=best)
+    if env_id is not None and env_id != files.env_id:
+        raise ValueError(f"agent {str(target)!r} was trained on {files.env_id}, not {env_id}")
+    _warn_scene(target, files.manifest["scene"], scene)
+    obs_size = files.manifest["observation"]["size"]
+    # the statistics first: reading them is cheap, the network costs a torch build
+    norm = (load_normalization(files.norm_path, obs_size)[0] if files.norm_path is not None
+            else None)
+    policy, meta = load_policy_file(files.model_path)
+    for key, have in (("env_id", files.env_id), ("action_kind", files.action_kind),
+                      ("algo", files.algo)):
+        if meta[key] != have:
+            raise AgentError(f"agent file {str(files.model_path)!r} is a policy for {key} "
+                             f"{meta[key]!r}, but the agent folder's is {have!r} (agent.yml, "
+                             f"config.yml): the file is another agent's")
+    want = ((obs_size,), (files.manifest["action_size"],))
+    have_shapes = (tuple(policy.observation_space.shape), tuple(policy.action_space.shape))
+    if have_shapes != want:
+        raise AgentError(f"agent file {str(files.model_path)!r} is a policy of observations "
+                         f"{have_shapes[0]} and actions {have_shapes[1]}; agent.yml records "
+                         f"{want[0]} and {want[1]}")
+    return PPOPolicy(LoadedModel(policy), norm, files.run, name=name or f"ppo:{target.name}",
+                     deterministic=deterministic, observation_names=files.observation_names,
+                     reward_weights=files.reward_weights)
+
+
+def _warn_scene(folder: Path, trained_scene: str | None, scene: Any) -> None:
     scene_name = getattr(scene, "name", scene)
-    trained_scene = files.manifest["scene"]
-    if scene_name is not None and scene_name != trained_scene:
+    if trained_scene is not None and scene_name is not None and scene_name != trained_scene:
         import warnings
         warnings.warn(f"agent {folder.name!r} was trained on scene {trained_scene!r}; "
-                      f"evaluating it on {scene_name!r}", stacklevel=2)
-    obs_size = files.manifest["observation"]["size"]
-    # the statistics first: reading them is cheap, the model costs a torch load
-    vn = (load_vecnormalize(files.norm_path, obs_size) if files.norm_path is not None
-          else None)
-    model = load_model(files.model_path, obs_size, files.manifest["action_size"],
-                       custom_objects_for(files.entry), files.algo)
-    return PPOPolicy(model, vn, config, name=name or f"ppo:{folder.name}",
-                     deterministic=deterministic,
-                     observation_names=files.observation_names)
+                      f"evaluating it on {scene_name!r}", stacklevel=3)
+
+
+def _load_pickled_policy(pickled: Any, target: Path, env_id: str | None, scene: Any,
+                         deterministic: bool, best: bool, name: str | None,
+                         trust: bool | None) -> PPOPolicy:
+    """:func:`load_policy` of a pickled agent (:mod:`abb_gym.rl.legacy`), if trusted."""
+    from .legacy import load_pickled
+
+    loaded = load_pickled(pickled, trust, env_id, None, best)
+    if env_id is not None and env_id != loaded.env_id:
+        raise ValueError(f"agent {str(target)!r} was trained on {loaded.env_id}, not {env_id}")
+    _warn_scene(target, loaded.run.get("policy_env", {}).get("scene"), scene)
+    label = target.stem if target.suffix == ".zip" else target.name
+    return PPOPolicy(loaded.model, loaded.vecnormalize, loaded.run,
+                     name=name or f"ppo:{label}", deterministic=deterministic,
+                     observation_names=loaded.observation_names,
+                     reward_weights=loaded.reward_weights)
 
 
 def load_ppo(arg: str, env_id: str | None = None, scene: Any = None, **_: Any) -> PPOPolicy:

@@ -12,33 +12,38 @@ What one run does:
    narrows the machines' ranges early in training (if ``curriculum``:
    :mod:`abb_gym.rl.curriculum`);
 2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy, SAC or TQC if the config's
-   ``algo`` says so: :func:`~abb_gym.rl.algorithms.algorithm_of`) for ``n_timesteps``
+   ``algo`` says so: :func:`~abb_gym.rl.config.algorithm_of`) for ``n_timesteps``
    environment steps with the seed (Python, NumPy, torch,
    the environments' generators and the action space), a progress bar, a test-set evaluation
    every ``eval_freq`` steps and checkpoints every ``checkpoint_freq`` steps;
 3. writes the run folder (default ``runs/<config>/s<seed>-<time>``, git-ignored):
 
-=========================  ==================================================================
-file                       content
-=========================  ==================================================================
-``model.zip``              final model
-``vecnormalize.pkl``       its VecNormalize statistics (load with ``training=False,
-                           norm_reward=False``: :func:`abb_gym.rl.load_policy` does)
-``best_model.zip``,        the model (and statistics) with the best test-set score
-``best_vecnormalize.pkl``  (mean return on the held-out test preset)
-``config.yml``             the config as run (zoo style, keyed by the env id, reusable with
-                           ``--config``) and ``_run``: seed, policy-relevant environment
-                           settings, evaluation environment, wall time, env-steps/s,
-                           versions, final evaluation
-``evaluations.csv``        one row per evaluation: timesteps, wall time, the test-set summary
-``evaluations.npz``        SB3 ``EvalCallback`` layout: timesteps, results (episode returns),
-                           ep_lengths
-``evaluation.json``        final test-set evaluation of the final model (summary + episodes)
-``agent.yml``              manifest: fingerprints of the models and statistics, and the env
-                           id, scene and observation layout the statistics were fitted on
-                           (:mod:`abb_gym.rl.agent_files`; checked when the agent is loaded)
-``checkpoints/``           ``ppo_<steps>_steps.zip`` and ``ppo_vecnormalize_<steps>_steps.pkl``
-=========================  ==================================================================
+=============================  ==============================================================
+file                           content
+=============================  ==============================================================
+``policy.safetensors``         final network (weights and what rebuilds it; no pickle:
+                               :mod:`abb_gym.rl.policy_files`)
+``optimizer.safetensors``      its optimiser's state (for a warm start, ``init_from``)
+``vecnormalize.json``          its VecNormalize statistics (frozen on loading:
+                               :func:`abb_gym.rl.load_policy` does)
+``best_policy.safetensors``,   the network (optimiser, statistics) with the best test-set
+``best_optimizer...``,         score (mean return on the held-out test preset)
+``best_vecnormalize.json``
+``config.yml``                 the config as run (zoo style, keyed by the env id, reusable
+                               with ``--config``) and ``_run``: seed, policy-relevant
+                               environment settings, evaluation environment, wall time,
+                               env-steps/s, versions, final evaluation
+``evaluations.csv``            one row per evaluation: timesteps, wall time, the test-set
+                               summary
+``evaluations.npz``            SB3 ``EvalCallback`` layout: timesteps, results (episode
+                               returns), ep_lengths
+``evaluation.json``            final test-set evaluation of the final model (summary +
+                               episodes)
+``agent.yml``                  manifest: env id, action kind, observation layout, reward
+                               weights and the fingerprints of the files
+                               (:mod:`abb_gym.rl.agent_files`; checked when loaded)
+``checkpoints/``               ``ppo_<steps>_steps/`` with the three model files
+=============================  ==============================================================
 
 With ``tensorboard_log`` (:func:`train`'s argument or the config's ``_abb_gym`` key), SB3 also
 writes TensorBoard event files there, one run ``<config>_s<seed>_<n>`` per training: the
@@ -65,10 +70,12 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .._files import replacing, write_text
 from .algorithms import algorithm_class
 from .config import TrainConfig
 from .env_factory import eval_env_kwargs, make_sb3_env, policy_env_fields
 from .agent import PPOPolicy
+from .policy_files import FrozenNormalizer, save_model_files
 from ..evaluation.evaluate import summarise
 from .rollout import KEY_METRICS, brief, run_episodes
 
@@ -90,31 +97,6 @@ def evaluate_model(model, env_id: str, env_kwargs: dict[str, Any], meta: dict[st
     return summarise(records), records
 
 
-class FrozenNormalizer:
-    """A copy of VecNormalize's observation statistics that never updates."""
-
-    def __init__(self, mean: np.ndarray, var: np.ndarray, clip_obs: float, epsilon: float,
-                 norm_obs: bool = True):
-        self.mean = np.array(mean, dtype=np.float64)
-        self.var = np.array(var, dtype=np.float64)
-        self.clip_obs = float(clip_obs)
-        self.epsilon = float(epsilon)
-        self.norm_obs = bool(norm_obs)
-        self.training = False
-        self.norm_reward = False
-
-    @classmethod
-    def from_vecnormalize(cls, vn) -> "FrozenNormalizer":
-        return cls(vn.obs_rms.mean, vn.obs_rms.var, vn.clip_obs, vn.epsilon, vn.norm_obs)
-
-    def normalize_obs(self, obs: np.ndarray) -> np.ndarray:
-        if not self.norm_obs:
-            return obs
-        out = np.clip((obs - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip_obs,
-                      self.clip_obs)
-        return out.astype(np.float32)
-
-
 def _callbacks_base():
     from stable_baselines3.common.callbacks import BaseCallback
     return BaseCallback
@@ -127,9 +109,12 @@ def _make_eval_callback_class():
         """Evaluate on the fixed test set every ``eval_freq`` env steps; keep the best model."""
 
         def __init__(self, env_id: str, env_kwargs: dict, run_dir: Path, eval_freq: int,
-                     episodes: int, seed: int, meta: dict, verbose: int = 0):
+                     episodes: int, seed: int, meta: dict, verbose: int = 0,
+                     algo: str = "ppo"):
             super().__init__(verbose)
             self.env_id = env_id
+            self.algo = algo
+            self.action_kind = meta["policy_env"]["kind"]
             self.env_kwargs = env_kwargs
             self.run_dir = Path(run_dir)
             self.eval_freq = int(eval_freq)
@@ -171,10 +156,8 @@ def _make_eval_callback_class():
             self._write()
             if means["return"] > self.best:
                 self.best = means["return"]
-                self.model.save(self.run_dir / "best_model.zip")
-                vn = self.model.get_vec_normalize_env()
-                if vn is not None:
-                    vn.save(str(self.run_dir / "best_vecnormalize.pkl"))
+                save_model_files(self.run_dir, self.model, self.env_id, self.action_kind,
+                                 self.algo, prefix="best_")
             if self.verbose:
                 # the residual is measured in the operating band only: none reached it, none
                 residual = (f"{means['residual_vibration']:.3f} W_r/e"
@@ -186,14 +169,14 @@ def _make_eval_callback_class():
                       f"balanced {means['balanced']:.2f}", flush=True)
 
         def _write(self) -> None:
-            with open(self.run_dir / "evaluations.csv", "w", newline="") as fh:
+            with replacing(self.run_dir / "evaluations.csv", "w", newline="") as fh:
                 w = csv.DictWriter(fh, fieldnames=list(self.rows[0]))
                 w.writeheader()
                 w.writerows(self.rows)
-            np.savez(self.run_dir / "evaluations.npz",
-                     timesteps=np.array(self.npz["timesteps"]),
-                     results=np.array(self.npz["results"]),
-                     ep_lengths=np.array(self.npz["ep_lengths"]))
+            with replacing(self.run_dir / "evaluations.npz", "wb") as fh:
+                np.savez(fh, timesteps=np.array(self.npz["timesteps"]),
+                         results=np.array(self.npz["results"]),
+                         ep_lengths=np.array(self.npz["ep_lengths"]))
 
         def _on_training_end(self) -> None:
             if self.eval_freq > 0 and self.num_timesteps != self.last_eval:
@@ -218,6 +201,34 @@ def _make_progress_callback_class():
             return True
 
     return _ProgressBar
+
+
+def _make_checkpoint_class():
+    BaseCallback = _callbacks_base()
+
+    class _Checkpoints(BaseCallback):
+        """Every ``save_freq`` calls (vector steps), the model's files in the safe format
+        (:func:`~abb_gym.rl.policy_files.save_model_files`) in
+        ``checkpoints/ppo_<steps>_steps/``: SB3's ``CheckpointCallback`` writes pickles."""
+
+        def __init__(self, save_freq: int, folder: Path, meta: dict, algo: str):
+            super().__init__(0)
+            self.save_freq, self.folder = int(save_freq), Path(folder)
+            self.env_id, self.kind, self.algo = meta["env_id"], meta["policy_env"]["kind"], algo
+
+        def _on_step(self) -> bool:
+            if self.n_calls % self.save_freq == 0:
+                target = self.folder / f"ppo_{self.num_timesteps}_steps"
+                target.mkdir(parents=True, exist_ok=True)
+                save_model_files(target, self.model, self.env_id, self.kind, self.algo)
+            return True
+
+    return _Checkpoints
+
+
+def Checkpoints(*args, **kwargs):
+    """The checkpoint callback (built lazily: SB3 is imported on first use)."""
+    return _make_checkpoint_class()(*args, **kwargs)
 
 
 def ProgressBar():
@@ -287,7 +298,7 @@ def _repo_relative(path: str) -> str:
 
 def write_config(run_dir: Path, cfg: TrainConfig, meta: dict[str, Any]) -> None:
     data = {**_yaml_safe(cfg.to_file_data()), "_run": _yaml_safe(meta)}
-    (run_dir / "config.yml").write_text(yaml.safe_dump(data, sort_keys=False))
+    write_text(run_dir / "config.yml", yaml.safe_dump(data, sort_keys=False))
 
 
 def check_tensorboard_log(value: Any) -> Path | None:
@@ -334,7 +345,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         ``tensorboard`` package (training extra).  None: the config's, else no TensorBoard.
     """
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -393,15 +404,14 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
                                   cfg.eval_episodes, cfg.eval_seed, meta,
-                                  verbose=max(verbose, int(progress is False)))
+                                  verbose=max(verbose, int(progress is False)), algo=cfg.algo)
     callbacks.append(eval_cb)
     if cfg.curriculum is not None:
         from .curriculum import CurriculumCallback
         callbacks.append(CurriculumCallback(cfg.curriculum, cfg.n_timesteps))
     if cfg.checkpoint_freq > 0:
-        callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
-                                            str(run_dir / "checkpoints"), name_prefix="ppo",
-                                            save_vecnormalize=cfg.normalize is not None))
+        callbacks.append(Checkpoints(max(cfg.checkpoint_freq // cfg.n_envs, 1),
+                                     run_dir / "checkpoints", meta, cfg.algo))
     if progress:
         callbacks.append(ProgressBar())
     t0 = time.perf_counter()
@@ -409,10 +419,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
                 tb_log_name=tensorboard_run_name(cfg, seed))
     wall = time.perf_counter() - t0
     steps = int(model.num_timesteps)
-    model.save(run_dir / "model.zip")
-    vn = model.get_vec_normalize_env()
-    if vn is not None:
-        vn.save(str(run_dir / "vecnormalize.pkl"))
+    save_model_files(run_dir, model, cfg.env_id, meta["policy_env"]["kind"], cfg.algo)
     meta.update({"wall_time_s": round(wall, 1), "env_steps": steps,
                  "env_steps_per_s": round(steps / wall, 1),
                  "evaluations": eval_cb.rows[-1] if eval_cb.rows else None})
@@ -420,14 +427,14 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     if final_eval:
         evaluation, records = evaluate_model(model, cfg.env_id, eval_kwargs, meta,
                                              cfg.eval_episodes, cfg.eval_seed)
-        (run_dir / "evaluation.json").write_text(json.dumps(
+        write_text(run_dir / "evaluation.json", json.dumps(
             _yaml_safe({"env_id": cfg.env_id, "env_kwargs": eval_kwargs,
                         "seed": cfg.eval_seed, "summary": evaluation, "episodes": records}),
             indent=1))
         meta["final_evaluation"] = brief(evaluation)
     write_config(run_dir, cfg, meta)
     # last, over the files as they now are: the manifest fingerprints them
-    from .agent_files import write_manifest  # here: keeps `python -m` of that module clean
+    from .agent_files import write_manifest
     write_manifest(run_dir, observation_names=venv.unwrapped.setup.obs_names)
     env.close()
     return RunResult(run_dir, wall, steps, steps / wall, evaluation)

@@ -2,10 +2,13 @@
 
 With ``_abb_gym: {init_from: {folder: runs/x, model: best}}`` (or ``abb-gym train
 --init-from runs/x``), training builds the network of its own config as always, then loads
-the weights (and the optimiser state) of the agent folder's ``best_model.zip`` or
-``model.zip`` into it (SB3's ``set_parameters``, exact match), and its observation
-statistics (``best_vecnormalize.pkl`` / ``vecnormalize.pkl``) into the training
-``VecNormalize``, which keeps updating them.  Everything else comes from the new config: the
+the weights of the agent folder's ``best_policy.safetensors`` or ``policy.safetensors`` into
+it (exact names and shapes), the optimiser's state (``optimizer.safetensors``) when the
+folder has it, and its observation statistics (``best_vecnormalize.json`` /
+``vecnormalize.json``) into the training ``VecNormalize``, which keeps updating them.
+Nothing is unpickled; a folder of abb-gym's first format (``model.zip``,
+``vecnormalize.pkl``: pickles) is read only when trusted (``--trust-pickle``), with SB3's
+``set_parameters``.  Everything else comes from the new config: the
 learning rate and its schedule, the clip range, the reward weights and the band of the
 training environment, the number of steps; the step counter starts at 0 again.  This is
 rl_zoo3's ``--trained-agent`` (``-i``), which also takes the hyperparameters of the new file.
@@ -51,6 +54,9 @@ def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str, setup:
         raise AgentError(f"init_from.folder {str(folder)!r} is the new run's own folder: "
                          f"training would overwrite the model it starts from")
     files = check_folder(folder, best=settings["model"] == "best")
+    if files.pickles:  # checked with the rest, before any training
+        from .agent_files import require_trust
+        require_trust(folder, files.pickles)
     where = f"init_from {str(folder)!r}"
     if files.env_id != env_id:
         raise AgentError(f"{where} is an agent of {files.env_id!r}, this config trains "
@@ -86,17 +92,34 @@ def load_warm_start(model: Any, env: Any, files: Any) -> dict[str, Any]:
     ``VecNormalize``, its statistics into ``env``; returns the ``_run.init_from`` record."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from .agent_files import AgentError, _one_line, load_vecnormalize
+    from .agent_files import AgentError, _one_line
 
-    try:
-        model.set_parameters(str(files.model_path), exact_match=True, device="cpu")
-    except Exception as exc:  # a network of another shape: torch's error names the tensors
-        raise AgentError(f"init_from: the network of {str(files.model_path)!r} does not match "
-                         f"this config's policy ({_one_line(exc)})") from None
-    if isinstance(env, VecNormalize) and files.norm_path is not None:
-        stats = load_vecnormalize(files.norm_path, env.observation_space.shape[0])
-        env.obs_rms = stats.obs_rms.copy()
-        env.ret_rms = stats.ret_rms.copy()
+    normalizing = isinstance(env, VecNormalize) and files.norm_path is not None
+    if files.pickles:  # abb-gym's first format, trusted in warm_start_files
+        from .legacy import read_vecnormalize
+        try:
+            model.set_parameters(str(files.model_path), exact_match=True, device="cpu")
+        except Exception as exc:  # a network of another shape: torch's error names the tensors
+            raise AgentError(f"init_from: the network of {str(files.model_path)!r} does not "
+                             f"match this config's policy ({_one_line(exc)})") from None
+        if normalizing:
+            stats = read_vecnormalize(files.norm_path, env.observation_space.shape[0])
+            env.obs_rms = stats.obs_rms.copy()
+            env.ret_rms = stats.ret_rms.copy()
+    else:
+        from safetensors.torch import load_model
+
+        from .policy_files import load_normalization, load_optimizer, restore_normalization
+        try:
+            load_model(model.policy, str(files.model_path), strict=True, device="cpu")
+        except Exception as exc:  # a network of another shape: the message names the tensors
+            raise AgentError(f"init_from: the network of {str(files.model_path)!r} does not "
+                             f"match this config's policy ({_one_line(exc)})") from None
+        if files.optimizer_path is not None:
+            load_optimizer(model.policy.optimizer, files.optimizer_path)
+        if normalizing:
+            _, state = load_normalization(files.norm_path, env.observation_space.shape[0])
+            restore_normalization(env, state)
     # check_folder has just matched the file against this fingerprint of its manifest
     name = files.model_path.name
     return {"folder": str(files.folder), "model": name,
