@@ -71,7 +71,8 @@ def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEA
 
 def reward_line(result: EvaluationResult) -> str:
     """The reward weights the returns of ``result`` were computed with, in one line."""
-    weights = ", ".join(f"{k} {v:g}" for k, v in result.reward_weights.items())
+    weights = ", ".join(f"{k} {v:g}" + (" m" if k == "length_scale" else "")
+                        for k, v in result.reward_weights.items() if v is not None)
     source = f" ({result.reward_source})" if result.reward_source else ""
     return f"Reward weights{source}: {weights}."
 

@@ -90,6 +90,8 @@ LEGACY_FORMAT = 1
 TRUST_ENV = TRUST_PICKLE_ENV
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 _REWARD_KEYS = ("vibration", "time", "effort", "residual", "failure")
+# the reward's unit of length [m], recorded where the agent's preset sets one (SpinRedistribute)
+_REWARD_UNIT = "length_scale"
 
 
 class PickleRefused(AgentError):
@@ -273,9 +275,12 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
         fail("action_size", "an integer >= 1")
     if fmt == FORMAT:
         weights = data.get("reward_weights")
-        if (not isinstance(weights, Mapping) or set(weights) != set(_REWARD_KEYS)
-                or not all(_is_weight(v) for v in weights.values())):
-            fail("reward_weights", f"a mapping of {', '.join(_REWARD_KEYS)} to numbers >= 0")
+        if (not isinstance(weights, Mapping)
+                or set(weights) - {_REWARD_UNIT} != set(_REWARD_KEYS)
+                or not all(_is_weight(v) for v in weights.values())
+                or weights.get(_REWARD_UNIT, 1.0) == 0):
+            fail("reward_weights", f"a mapping of {', '.join(_REWARD_KEYS)} to numbers >= 0 "
+                                   f"(and optionally {_REWARD_UNIT}, > 0 [m])")
     if not isinstance(data.get("vecnormalize"), bool):
         fail("vecnormalize", "true or false")
     model_name, norm_name, _ = policy_file_names(format=fmt)
@@ -402,7 +407,10 @@ def evaluation_reward_weights(env_id: str, run: Mapping[str, Any],
         reward = env.unwrapped.setup.config.to_dict()["reward"]
     finally:
         env.close()
-    return {k: float(reward[k]) for k in _REWARD_KEYS}
+    out = {k: float(reward[k]) for k in _REWARD_KEYS}
+    if reward.get(_REWARD_UNIT) is not None:
+        out[_REWARD_UNIT] = float(reward[_REWARD_UNIT])
+    return out
 
 
 def write_manifest(folder: str | Path, observation_names: Sequence[str] | None = None,
