@@ -118,7 +118,8 @@ def _report(res) -> None:
                     f"{m['ci_high']:.{digits}f}]")
         print(f"test set ({s['episodes']} episodes, 95 % CI): return {fmt('return')}, "
               f"at speed {fmt('at_speed', 2)}, residual vibration "
-              f"{fmt('residual_vibration')} W_r/e, run-up time {fmt('run_up_time', 2)} s, "
+              f"{fmt('residual_vibration')} {s.get('length_unit', 'W_r/e')}, run-up time "
+              f"{fmt('run_up_time', 2)} s, "
               f"balanced {fmt('balanced', 2)}")
 
 

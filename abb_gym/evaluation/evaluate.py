@@ -343,7 +343,9 @@ def reward_weights(env_id: str, scene: Any, preset: str = "test", **env_kwargs: 
 def summarise(episodes: list[dict]) -> dict[str, Any]:
     """Mean and 95 % confidence interval of every metric (shares: Wilson interval).
     ``n`` counts the finite values (time to speed is NaN for runs that never got there)."""
-    out: dict[str, Any] = {"episodes": len(episodes)}
+    out: dict[str, Any] = {"episodes": len(episodes),
+                           "length_unit": episodes[0].get("length_unit", "W_r/e")
+                           if episodes else "W_r/e"}
     for key in METRICS:
         vals = np.array([float(e[key]) for e in episodes])
         if key in SHARES:

@@ -5,7 +5,8 @@ tests and ``abb-gym evaluate --policy ppo:PATH`` score agents with exactly the s
 and metrics: episode ``k`` of a test set with seed ``S`` is the environment reset with seed
 ``S + k`` on the preset (``test`` by default); metrics per episode as in
 :mod:`abb_gym.evaluation.metrics` (``at_speed``: the run-up completed, ``run_up_time`` [s]:
-the settled entry, ``residual_vibration`` [W_r/e] over the settling window, ``peak_whirl``,
+the settled entry, ``residual_vibration`` [W_r/e, or the task's length unit] over the
+settling window, ``peak_whirl``,
 ``balanced``, ``return``, ...).
 """
 from __future__ import annotations

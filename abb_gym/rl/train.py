@@ -160,7 +160,8 @@ def _make_eval_callback_class():
                                  self.algo, prefix="best_")
             if self.verbose:
                 # the residual is measured in the operating band only: none reached it, none
-                residual = (f"{means['residual_vibration']:.3f} W_r/e"
+                unit = records[0].get("length_unit", "W_r/e") if records else "W_r/e"
+                residual = (f"{means['residual_vibration']:.3f} {unit}"
                             if math.isfinite(means["residual_vibration"])
                             else "n/a (no episode settled)")
                 print(f"eval @ {self.num_timesteps}: return {means['return']:.3f}, at speed "
