@@ -17,9 +17,9 @@ Accuracy against the C library (``tests/test_elementary.py`` measures it):
 =====================  ============================  ==========================================
 function               arguments                     error
 =====================  ============================  ==========================================
-:func:`sincos`         ``|x| <= 1.6e6`` rad           <= 2 ulp of the result, or 2 ulp of 1 near
+:func:`sincos`         ``|x| <= 1.6e6`` rad          <= 2 ulp of the result, or 2 ulp of 1 near
                                                      a zero of the function (absolute 4.5e-16)
-:func:`exp_bounded`    ``[-708, 709]``                <= 2 ulp
+:func:`exp_bounded`    ``[-708, 709]``               <= 2 ulp
 :func:`tanh`           all finite                    <= 6 ulp relative
 =====================  ============================  ==========================================
 
