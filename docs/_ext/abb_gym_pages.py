@@ -1,0 +1,427 @@
+"""Pages generated from the package when the docs are built (a Sphinx extension).
+
+One page per environment id (``environments/<id>.md``), the preset and scene references and
+the literature checks are written from the code, so that they cannot drift from it:
+
+* :func:`tasks` lists the environments: every id in ``abb_gym.envs.ENV_IDS`` with its
+  Gymnasium registration and its action model (the environment class of the registered
+  vector entry point's ``kind``).  It is the one place that enumerates them: when
+  ``abb_gym/envs/`` declares its tasks in a registry (one declaration per task: id, action
+  model, observation spec, episode parameters), :func:`tasks` reads that registry and every
+  page follows.
+* The text of an environment page is its module's docstring (Description, Action Space,
+  Episode length) and ``abb_gym.envs.base.COMMON_DOC`` (Observation Space, Rewards, Starting
+  State, Episode End, Info, Arguments, Bad input), converted from their Markdown-with-roles to
+  MyST.  The tables of observation entries, episode lengths and presets are computed with
+  ``abb_gym.envs.setup.EnvSetup`` and :func:`abb_gym.envs.episode_steps`, exactly as
+  ``gym.make`` would build the environment.
+* The preset and scene field tables come from the field declarations
+  (:func:`abb_gym.configuration.fields_table`), the shipped presets and scenes from their
+  YAML files, and the validation page from the docstrings of the literature tests, which state
+  each value, its tolerance and why.
+
+Pages are written into the source folder before Sphinx reads it, and only when their text
+changed (git ignores them: ``docs/.gitignore``).
+"""
+from __future__ import annotations
+
+import ast
+import math
+import re
+import textwrap
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+
+DOCS = Path(__file__).resolve().parents[1]
+REPO = DOCS.parent
+DEFAULT_SCENE, DEFAULT_PRESET = "yoshida_odd", "train"
+VALIDATION_TESTS = ("test_validation.py", "test_model.py", "test_analysis_lu_hung.py",
+                    "test_analysis_spannan.py", "test_analysis_rotating_frame.py",
+                    "test_analysis_rezaee_fathi.py", "test_analysis_timedomain.py",
+                    "test_effects.py")
+
+
+# --- what the environments are -------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Task:
+    """One registered environment id, as the pages need it."""
+
+    env_id: str
+    kind: str                     # action model: "speed", "torque", "dwell"
+    module: ModuleType            # its module, whose docstring describes it
+    entry_point: str
+    vector_entry_point: str
+    max_episode_steps: int | None  # registered (None: gym.make wraps its own TimeLimit)
+
+
+def tasks() -> list[Task]:
+    """Every environment id of the package (the one place to re-point at a task registry)."""
+    import importlib
+
+    import gymnasium as gym
+
+    from abb_gym import envs
+    from abb_gym.envs.base import BalancerEnv
+    for name in envs.__all__:   # the environment classes load on first use
+        getattr(envs, name)
+    by_kind = {cls.kind: cls for cls in _subclasses(BalancerEnv)}
+    out = []
+    for env_id in envs.ENV_IDS:
+        spec = gym.spec(env_id)
+        module_name, _, cls_name = str(spec.vector_entry_point).partition(":")
+        kind = getattr(importlib.import_module(module_name), cls_name).kind
+        out.append(Task(env_id, kind, importlib.import_module(by_kind[kind].__module__),
+                        str(spec.entry_point), str(spec.vector_entry_point),
+                        spec.max_episode_steps))
+    return out
+
+
+def _subclasses(cls):
+    for sub in cls.__subclasses__():
+        yield sub
+        yield from _subclasses(sub)
+
+
+def env_docname(env_id: str) -> str:
+    """The page of ``env_id``, relative to the docs folder, without suffix."""
+    return "environments/" + env_id.replace("/", "-")
+
+
+# --- Markdown-with-roles (the docstrings) to MyST ------------------------------------------
+
+_ROLE = re.compile(r":(mod|func|class|meth|attr|data|obj|exc):`([^`]+)`")
+
+
+def to_myst(text: str) -> str:
+    """A docstring written in Markdown with reStructuredText roles, as MyST Markdown: roles
+    become ``{py:role}`` and a pipe-table cell continued on the next line is joined to it."""
+    text = _ROLE.sub(lambda m: "{py:%s}`%s`" % (m.group(1), re.sub(r"\s+", "", m.group(2))),
+                     text)
+    out: list[str] = []
+    for line in text.splitlines():
+        if out and out[-1].lstrip().startswith("|") and not out[-1].rstrip().endswith("|") \
+                and line.strip():
+            out[-1] = out[-1].rstrip() + " " + line.strip()
+        else:
+            out.append(line)
+    return "\n".join(out)
+
+
+def sections(doc: str) -> tuple[str, dict[str, str]]:
+    """The lead paragraph of a Gymnasium-style docstring and its ``## `` sections by title."""
+    parts = re.split(r"^## +(.+)$", textwrap.dedent(doc), flags=re.M)
+    return parts[0].strip(), {title.strip(): body.strip()
+                              for title, body in zip(parts[1::2], parts[2::2])}
+
+
+def rst_block(text: str) -> str:
+    """reStructuredText inside a MyST page (absolute values ``|x|`` escaped, as in the API
+    reference)."""
+    from abb_gym_docstrings import escape_bars
+    lines = [escape_bars(line) for line in text.strip("\n").splitlines()]
+    return "```{eval-rst}\n" + "\n".join(lines) + "\n```"
+
+
+def md_table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _num(x: float) -> str:
+    return f"{x:.4g}" if math.isfinite(x) else str(x)
+
+
+# --- the environment pages -----------------------------------------------------------------
+
+def observation_rows(kind: str, scene: str, preset: str, **kwargs) -> list[list[str]]:
+    """Index, name and bounds of every observation entry of an environment as ``gym.make``
+    builds it (``kwargs``: observe_balls and preset overrides)."""
+    from abb_gym.envs.setup import EnvSetup
+    observe_balls = kwargs.pop("observe_balls", False)
+    setup = EnvSetup(kind, scene, preset, observe_balls, None, kwargs)
+    space = setup.observation_space
+    return [[str(i), f"`{name}`", f"[{_num(lo)}, {_num(hi)}]"]
+            for i, (name, lo, hi) in enumerate(zip(setup.obs_names, space.low, space.high))]
+
+
+def episode_rows(task: Task) -> list[list[str]]:
+    """Per shipped scene: operating and critical speed, control interval, episode length and
+    steps under the default preset, and the presets refused on it (with the reason)."""
+    from abb_gym import list_scenes, load_scene
+    from abb_gym.envs import episode_steps, list_presets
+    from abb_gym.envs.setup import EnvSetup
+    rows = []
+    for name in list_scenes():
+        scene = load_scene(name)
+        setup = EnvSetup(task.kind, name, DEFAULT_PRESET, False, None, {})
+        refused = []
+        for preset in list_presets():
+            try:
+                episode_steps(task.env_id, scene=name, preset=preset)
+            except ValueError as exc:
+                refused.append(f"`{preset}` ({_first_clause(str(exc))})")
+        rows.append([f"`{name}`", _num(setup.operating_speed), _num(scene.critical_speed),
+                     _num(setup.control_interval), _num(setup.episode_length),
+                     str(episode_steps(task.env_id, scene=name)), "; ".join(refused) or "-"])
+    return rows
+
+
+def _first_clause(message: str) -> str:
+    text = message.split(": ", 2)[-1]
+    return text.split(";")[0].split(" (")[0][:120]
+
+
+def preset_rows() -> list[list[str]]:
+    """Every shipped preset: its description, control interval and randomised ranges."""
+    import dataclasses
+
+    from abb_gym.envs import list_presets, load_preset
+    rows = []
+    for name in list_presets():
+        cfg = load_preset(name)
+        ranges = [f"`{f.name}` {_range(getattr(cfg.randomize, f.name))}"
+                  for f in dataclasses.fields(cfg.randomize)
+                  if getattr(cfg.randomize, f.name) is not None]
+        extras = [key for key, on in (("sync_vibration", cfg.sync_vibration.enabled),
+                                      ("observe_time: false", not cfg.observe_time),
+                                      (f"frame_stack {cfg.frame_stack}", cfg.frame_stack > 1))
+                  if on]
+        rows.append([f"`{name}`", cfg.description.strip().replace("\n", " "),
+                     _num(cfg.control_interval), ", ".join(ranges) or "none",
+                     ", ".join(extras) or "-"])
+    return rows
+
+
+def _range(value) -> str:
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(_num(v) for v in value) + "]"
+    return _num(value)
+
+
+def env_page(task: Task) -> str:
+    """The page of one environment id (MyST Markdown)."""
+    from abb_gym.envs.base import COMMON_DOC
+    from abb_gym.envs.setup import EnvSetup
+    lead, own = sections(task.module.__doc__)
+    _, common = sections(COMMON_DOC)
+    setup = EnvSetup(task.kind, DEFAULT_SCENE, DEFAULT_PRESET, False, None, {})
+    title = task.env_id
+    summary = lead.split(":", 1)[1].strip() if ":" in lead.splitlines()[0] else lead
+    summary = summary[:1].upper() + summary[1:]
+    limit = ("its own episode length (`gym.make` wraps a `TimeLimit` of exactly that many "
+             "steps)" if task.max_episode_steps is None else
+             f"{task.max_episode_steps} (a backstop; episodes are one step)")
+    facts = md_table(["", ""], [
+        ["Action space", f"`{setup.action_space}`"],
+        ["Observation space", f"`Box({setup.obs_dim},)` float32 on `{DEFAULT_SCENE}` / "
+                              f"`{DEFAULT_PRESET}` (the entries below)"],
+        ["Make", f'`gym.make("{task.env_id}")`'],
+        ["Vector environment", f'`gym.make_vec("{task.env_id}", num_envs=N, '
+                               f'vectorization_mode="vector_entry_point")`'],
+        ["Entry points", f"`{task.entry_point}`, vector `{task.vector_entry_point}`"],
+        ["max_episode_steps", limit],
+    ])
+    obs = md_table(["index", "name", "bounds"],
+                   observation_rows(task.kind, DEFAULT_SCENE, DEFAULT_PRESET))
+    extra = md_table(["index", "name", "bounds"], observation_rows(
+        task.kind, DEFAULT_SCENE, DEFAULT_PRESET, observe_balls=True,
+        sync_vibration={"enabled": True})[setup.frame_dim:])
+    episodes = md_table(["scene", "operating speed [rad/s]", "critical speed [rad/s]",
+                         "control interval [s]", "episode length [s]", "steps",
+                         "presets refused"], episode_rows(task))
+    parts = [
+        "<!-- generated by docs/_ext/abb_gym_pages.py from the package: edit the code -->",
+        f"# {title}", "", to_myst(summary), "", facts, "",
+        "## Description", "", to_myst(own.get("Description", "")), "",
+        "## Action Space", "", to_myst(own.get("Action Space", "")), "",
+        "## Observation Space", "",
+        to_myst(common["Observation Space"]), "",
+        f"The entries on `{DEFAULT_SCENE}` with the `{DEFAULT_PRESET}` preset "
+        f"(`env.unwrapped.observation_names` gives the same list):", "", obs, "",
+        "With `observe_balls=True` and `sync_vibration={\"enabled\": True}` these follow "
+        "(the `varied` presets switch the synchronous vibration on):", "", extra, "",
+        "## Rewards", "", to_myst(common["Rewards"]), "",
+        "## Starting State", "", to_myst(common["Starting State"]), "",
+        "## Episode End", "", to_myst(common["Episode End"]), "",
+        "### Episode length", "", to_myst(own.get("Episode length", "")), "",
+        f"Under the default preset `{DEFAULT_PRESET}` on each shipped scene (steps: "
+        "`abb_gym.envs.episode_steps`, which is `env.spec.max_episode_steps`):", "",
+        episodes, "",
+        "## Presets", "",
+        "Any preset works with any id; the table is the same for every environment. "
+        "Fields and ranges: [Presets](presets.md).", "",
+        md_table(["preset", "use", "control interval [s]", "randomised per episode",
+                  "observation"], preset_rows()), "",
+        "## Info", "", to_myst(common["Info"]), "",
+        "## Arguments", "", to_myst(common["Arguments"]), "",
+        "## Bad input", "", to_myst(common["Bad input"]), "",
+        "## API", "",
+        f"{{py:class}}`{task.module.__name__}."
+        f"{_class_name(task)}`, vector {{py:class}}`{task.vector_entry_point.replace(':', '.')}`.",
+        "",
+    ]
+    return "\n".join(parts)
+
+
+def _class_name(task: Task) -> str:
+    from abb_gym.envs.base import BalancerEnv
+    return next(c.__name__ for c in _subclasses(BalancerEnv) if c.kind == task.kind
+                and c.__module__ == task.module.__name__)
+
+
+def environments_table() -> str:
+    """The table of every id for the environments index (and the README's table)."""
+    rows = []
+    for task in tasks():
+        lead, own = sections(task.module.__doc__)
+        summary = lead.split(":", 1)[1].strip().rstrip(".") if ":" in lead else lead
+        summary = summary[:1].upper() + summary[1:]
+        action = _action_summary(own.get("Action Space", ""))
+        rows.append([f"[`{task.env_id}`](/{env_docname(task.env_id)}.md)",
+                     to_myst(summary), action])
+    return md_table(["id", "task", "action (Box [-1, 1])"], rows)
+
+
+def _action_summary(text: str) -> str:
+    rows = [line for line in text.splitlines() if re.match(r"\|\s*\d+\s*\|", line)]
+    return "; ".join(line.split("|")[2].strip() for line in rows)
+
+
+# --- presets, scenes, validation -----------------------------------------------------------
+
+def presets_page() -> str:
+    from abb_gym.configuration import fields_table
+    from abb_gym.envs import config
+    return "\n".join([
+        "<!-- generated by docs/_ext/abb_gym_pages.py from the package: edit the code -->",
+        "# Presets", "",
+        "A preset (`configs/envs/<name>.yaml`) fixes everything about an environment except "
+        "the machine (the scene) and the action type.  Pass its name as `preset=`, or any "
+        "field as a keyword to `gym.make` (`control_interval=0.05`, "
+        "`reward={\"residual\": 6}`); the nested sections `reward`, `dwell`, `randomize` and "
+        "`sync_vibration` merge key by key.  Errors name the field and its allowed range.", "",
+        "## Shipped presets", "",
+        md_table(["preset", "use", "control interval [s]", "randomised per episode",
+                  "observation"], preset_rows()), "",
+        "## Fields", "",
+        "Declared once on `abb_gym.envs.config.EnvConfig` and its sections (unit, bounds, "
+        "meaning); `null` where a scene-derived default exists.", "",
+        rst_block(fields_table(config._doc_rows())), "",
+        "## Notes", "",
+        to_myst(_after(config.__doc__, "A ``randomize`` entry")), "",
+    ])
+
+
+def _after(doc: str, marker: str) -> str:
+    return doc[doc.index(marker):].replace("``", "`")
+
+
+def scenes_page() -> str:
+    from abb_gym import list_scenes, load_scene
+    from abb_gym.configuration import fields_table, specs
+    from abb_gym.physics.scene import Scene
+    rows = []
+    for name in list_scenes():
+        s = load_scene(name)
+        rows.append([f"`{name}`", s.description, s.source, str(s.ball_count),
+                     _num(s.critical_speed), _num(s.drive_operating_speed),
+                     ", ".join(sorted(s.effects)) or "-"])
+    return "\n".join([
+        "<!-- generated by docs/_ext/abb_gym_pages.py from the package: edit the code -->",
+        "# Scene reference", "",
+        "A scene is one machine: a YAML file in SI units and radians, grouped into sections. "
+        "Load one by name (`abb_gym.load_scene(\"yoshida_odd\")`) or by path; override any "
+        "field by keyword (`load_scene(\"yoshida_odd\", ball_mass=2e-3)`) or on the command "
+        "line (`--set ball_mass=2e-3`).  The keyword and `--set` name is the YAML path with "
+        "its dot replaced by an underscore (`balls.mass` is `ball_mass`; the table lists "
+        "both where they differ).  How to write your own: "
+        "[Your own machine](engineers.md#your-own-machine).", "",
+        "## Shipped scenes", "",
+        md_table(["scene", "machine", "source", "balls", "critical speed [rad/s]",
+                  "operating speed [rad/s]", "effects on"], rows), "",
+        "## Fields", "",
+        "Declared once on `abb_gym.physics.scene.Scene`: unit, allowed range, meaning.  "
+        "Per-ball fields take one number or one per ball.", "",
+        _scene_fields(fields_table, specs, Scene), "",
+        "## Rules across fields", "",
+        to_myst(_paragraph(load_scene.__module__, "Cross-field rules")), "",
+    ])
+
+
+def _scene_fields(fields_table, specs, scene_cls) -> str:
+    """The scene's field table (``fields_table``'s columns) with the keyword name added after
+    the YAML path where they differ."""
+    from abb_gym.configuration import bounds_text
+    rows = []
+    for name, spec in specs(scene_cls).items():
+        if name == "name":
+            continue
+        unit = spec.unit or "-"
+        rng = bounds_text(spec).replace(f" [{unit}]", "")
+        rows.append([f"`{spec.yaml or name}`", f"`{name}`" if spec.yaml and spec.yaml != name
+                     else "", unit, rng, spec.doc + (" (one per ball)" if spec.per_ball else "")])
+    return md_table(["YAML path", "keyword / --set", "unit", "range", "meaning"], rows)
+
+
+def _paragraph(module_name: str, start: str) -> str:
+    import importlib
+    doc = importlib.import_module(module_name).__doc__
+    para = doc[doc.index(start):].split("\n\n")[0]
+    return para.replace("``", "`")
+
+
+def validation_page() -> str:
+    """Every literature and model check: its test, its statement (value, tolerance, why)."""
+    parts = ["<!-- generated by docs/_ext/abb_gym_pages.py from tests/: edit the tests -->",
+             "# The checks, test by test", "",
+             "Each check below is a test that `make test` runs; the text is the test's own "
+             "docstring, which states the reference value, the tolerance and why.  Parametrised "
+             "tests run once per parameter set.", ""]
+    for filename in VALIDATION_TESTS:
+        path = REPO / "tests" / filename
+        tree = ast.parse(path.read_text())
+        module_doc = ast.get_docstring(tree) or ""
+        parts += [f"## `tests/{filename}`", "", _plain(module_doc.split("\n\n")[0]), ""]
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef) and node.name.startswith("test_"):
+                doc = ast.get_docstring(node)
+                if doc:
+                    parts += [f"**`{node.name}`**", "", _plain(doc), ""]
+    return "\n".join(parts)
+
+
+def _plain(doc: str) -> str:
+    """A test docstring (reStructuredText) as MyST: literals and roles."""
+    doc = _ROLE.sub(lambda m: "`%s`" % m.group(2).lstrip("~"), doc)
+    return re.sub(r"``(.+?)``", r"`\1`", doc, flags=re.S)
+
+
+# --- Sphinx ---------------------------------------------------------------------------------
+
+def pages() -> dict[str, str]:
+    """Every generated page: path relative to the docs folder -> text."""
+    out = {env_docname(t.env_id) + ".md": env_page(t) for t in tasks()}
+    out["environments/_table.md"] = environments_table() + "\n"
+    out["environments/presets.md"] = presets_page()
+    out["scenes.md"] = scenes_page()
+    out["validation.md"] = validation_page()
+    return out
+
+
+def write_pages(app=None) -> list[Path]:
+    written = []
+    for rel, text in pages().items():
+        path = DOCS / rel
+        if not path.exists() or path.read_text() != text:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            written.append(path)
+    return written
+
+
+def setup(app):
+    app.connect("builder-inited", write_pages)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
