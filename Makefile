@@ -9,8 +9,11 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
-# torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
-PIP_INSTALL := $(PIP) install -q -c constraints.txt
+# torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages.
+# An editable install of a package whose data folders map into it (pyproject.toml: package-dir)
+# goes through setuptools' import finder, which prints a 10-line notice on every install; only
+# that notice is silenced, every other warning of the build still shows
+PIP_INSTALL := PYTHONWARNINGS="ignore:Editable installation" $(PIP) install -q -c constraints.txt
 
 .PHONY: setup demo test test-slow fuzz repeat bench kernels wheel docs clean
 
