@@ -1,0 +1,68 @@
+"""The package's text stays a reference, not a lab notebook, and the README stays a front door.
+
+Docstrings and comments state decisions, units and sources.  A date there is a measurement
+log that belongs in CHANGELOG.md, and a README section named there breaks when the README is
+reorganised: each is refused here, with the file and line, so a reader of the code is sent to
+a docs page or given the reason itself.  The docs site's own checks (every page builds, every
+link and image of the built site resolves) run in ``make docs`` (docs/_ext/site_check.py).
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+# the package, the shipped configuration files and the repository's scripts; not the trained
+# agents' run records (config.yml, evaluations.csv), which are data
+PACKAGE_TEXT = sorted([*(REPO / "abb_gym").rglob("*.py"), *(REPO / "configs").rglob("*.yaml"),
+                       *(REPO / "configs").rglob("*.yml"), *(REPO / "agents").glob("*.py")])
+# 2026-11-24, 2026-11-23/24, "24 November 2026", "November 2026"
+DATE = re.compile(r"\b(19|20)\d\d-[01]\d-[0-3]\d\b|\b([0-3]?\d )?(January|February|March|April|"
+                  r"May|June|July|August|September|October|November|December),? (19|20)\d\d\b")
+README = re.compile(r"README")
+
+
+def _hits(pattern: re.Pattern, paths) -> list[str]:
+    return [f"{path.relative_to(REPO)}:{n}: {line.strip()}"
+            for path in paths for n, line in enumerate(path.read_text().splitlines(), 1)
+            if pattern.search(line)]
+
+
+def test_the_patterns_catch_what_they_are_for():
+    assert DATE.search("measured on 2026-11-24 at 1024") and DATE.search("(2026-11-23/24)")
+    assert DATE.search("a profile of 24 November 2026") and DATE.search("in November 2026")
+    assert not DATE.search("Yoshida 2014, eq. 2-9; Spannan 2021 Table 6.4; 1e-12 m")
+    assert README.search('(README, "Blocks of 128 lanes")')
+
+
+def test_package_files_carry_no_dates():
+    assert PACKAGE_TEXT and _hits(DATE, PACKAGE_TEXT) == []
+
+
+def test_package_files_cite_no_readme():
+    # a README section as a reference breaks when the README changes: name a docs page
+    # (docs/...) or give the reason itself
+    assert _hits(README, PACKAGE_TEXT) == []
+
+
+def test_readme_is_a_front_door():
+    lines = (REPO / "README.md").read_text().splitlines()
+    assert len(lines) <= 250, f"README.md has {len(lines)} lines; the details go to docs/"
+    assert _hits(DATE, [REPO / "README.md"]) == []
+
+
+def test_readme_lists_every_environment_id_and_links_existing_docs():
+    from abb_gym.envs import ENV_IDS
+    text = (REPO / "README.md").read_text()
+    table = [line for line in text.splitlines() if line.startswith("| `abb_gym/")]
+    assert [line.split("`")[1] for line in table] == list(ENV_IDS)
+    links = re.findall(r"\]\(((?:docs|agents)/[^)#]+)", text)
+    assert links and [link for link in links if not (REPO / link).exists()] == []
+
+
+def test_the_results_page_keeps_its_generated_sections():
+    # agents/evaluate.py rewrites what lies between these markers (replace_between_markers)
+    text = (REPO / "docs" / "results" / "agents.md").read_text()
+    for marker in ("<!-- training:begin -->", "<!-- training:end -->",
+                   "<!-- comparison:begin -->", "<!-- comparison:end -->"):
+        assert text.count(marker) == 1, f"docs/results/agents.md: {marker}"
