@@ -55,11 +55,10 @@ since they carry their own run-up acceleration) run on RunUpSpeed, on the same m
 It writes the report of ``abb-gym evaluate`` to ``<out>/<agent>/`` (summary.md, episodes.csv,
 evaluation.json, timeseries.png, and pareto.png: residual against settled run-up time, every
 family in one chart), ``<out>/<agent>/comparison.json`` and ``<out>/comparison.md``.  Run
-without agent names, it evaluates every shipped agent and regenerates the marked sections of
-the docs page ``docs/results/agents.md`` (``<!-- training:begin/end -->``: the training cost
-and curves; ``<!-- comparison:begin/end -->``: every table, feedback gaps included);
-``--gap-readme FILE`` also writes the feedback-gap tables alone into FILE's
-``<!-- feedback-gap:begin/end -->`` section.
+without agent names, it evaluates every shipped agent.  ``--readme FILE`` regenerates FILE's
+marked sections (``<!-- comparison:begin/end -->``: every table; ``<!-- training:begin/end
+-->``: the training cost and curves), ``--gap-readme FILE`` the feedback-gap tables alone
+(``<!-- feedback-gap:begin/end -->``).
 
 The goal check (the project's "Tasks where feedback pays" goal), per agent, against
 ``baseline:knots`` on the same machines:
@@ -70,7 +69,7 @@ The goal check (the project's "Tasks where feedback pays" goal), per agent, agai
 * feedback value: the open-loop replay's residual at least 10 % worse, and its paired
   difference positive at 95 % confidence.
 
-    python agents/evaluate.py                                # everything, the docs page included
+    python agents/evaluate.py                                # every shipped agent
     python agents/evaluate.py runup_speed_yoshida_odd --episodes 200 --seed 0
     python agents/evaluate.py runs/x/s0-... --baselines knots retry --readme notes.md
 """
@@ -565,7 +564,7 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("agents", nargs="*",
                    help="shipped agent names (agents/trained/<name>) or run folders; default: "
-                        "every shipped agent, and docs/results/agents.md is regenerated")
+                        "every shipped agent")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per policy")
     p.add_argument("--seed", type=int, default=0, help="seed of the test set")
     p.add_argument("--preset", default=None,
@@ -594,15 +593,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="agents/results", help="report folder")
     add_executor_arguments(p, resume=False)
     p.add_argument("--readme", type=Path, default=None,
-                   help="regenerate the comparison section of this Markdown file (default "
-                        "without agent names: docs/results/agents.md)")
+                   help="regenerate the comparison section of this Markdown file")
     p.add_argument("--gap-readme", type=Path, default=None,
                    help="regenerate the feedback-gap section of this Markdown file")
     args = p.parse_args(argv)
     from abb_gym.rl.agent import trained_dir
-    everything = not args.agents
-    if everything:
-        args.readme = args.readme or REPO / "docs" / "results" / "agents.md"
     agents = args.agents or sorted(d.name for d in trained_dir().iterdir()
                                    if (d / "model.zip").exists())
     try:

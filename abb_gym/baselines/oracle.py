@@ -28,7 +28,7 @@ measures separate that knowledge from the rest: :func:`balls_elsewhere` replays 
 oracle profile with the balls started elsewhere, and :func:`run_oracle` with ``ball_draws``
 searches knowing every parameter of the machine but not the balls (each candidate scored on
 several ball starts, the best then run on the machine as drawn).  On the shipped scenes and
-presets (docs/results/index.md, "Where the oracle's gain comes from") the oracle's residual
+presets (docs/results.md, "Where the oracle's gain comes from") the oracle's residual
 gain over the tuned ``knots`` does not survive without the balls' start, and the machine alone
 is worth little more than run-up time.
 """

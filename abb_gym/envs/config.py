@@ -43,7 +43,7 @@ observation (every later entry moves up by one).  The episode's time limit still
 the observation is then not Markov near the end of an episode: a policy cannot tie its action
 to the clock (the clocked RunUpTorque agents learnt "late means behind" from it), but it
 cannot foresee the truncation penalty either (a clock-less RunUpTorque agent learnt to stay
-at rest: docs/results/what-was-tried.md).
+at rest: docs/what-was-tried.md).
 
 **Frame stack.**  ``frame_stack: k`` (> 1) returns the last k observations, oldest first,
 concatenated into one flat ``Box`` of ``k x obs_dim`` (a policy with memory that SB3's

@@ -14,10 +14,6 @@ from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
-from sphinx.util import logging
-
-logger = logging.getLogger(__name__)
-
 
 class _Links(HTMLParser):
     def __init__(self):
@@ -41,9 +37,10 @@ def _parse(path: Path) -> _Links:
     return parser
 
 
-def broken_links(outdir: Path) -> list[str]:
-    """``page: link`` for every local link of the built site that resolves to nothing."""
-    pages = {p: _parse(p) for p in outdir.rglob("*.html")}
+def broken_links(outdir: Path, built: list[Path] | None = None) -> list[str]:
+    """``page: link`` for every local link of the built pages (default: every page in
+    ``outdir``) that resolves to nothing."""
+    pages = {p: _parse(p) for p in (built if built is not None else outdir.rglob("*.html"))}
     problems = []
     for page, parsed in pages.items():
         for tag, link in parsed.links:
@@ -66,10 +63,16 @@ _SKIP = re.compile(r"^(_static|_sources|_modules)/")
 
 
 def check(app, exception):
+    from sphinx.util import logging   # here, so that broken_links works without Sphinx
+    logger = logging.getLogger(__name__)
     if exception is not None or app.builder.format != "html":
         return
     outdir = Path(app.outdir)
-    for problem in broken_links(outdir):
+    # the pages of this build (a page moved or removed since an earlier build leaves its old
+    # file behind, which is not part of the site)
+    built = [outdir / app.builder.get_target_uri(doc) for doc in sorted(app.env.found_docs)]
+    built += [p for p in outdir.glob("*.html") if p.stem in ("genindex", "py-modindex", "search")]
+    for problem in broken_links(outdir, [p for p in built if p.is_file()]):
         if not _SKIP.match(problem):
             logger.warning("broken link: %s", problem, type="site", subtype="link")
 
