@@ -83,6 +83,6 @@ docs: $(VENV)/.installed-docs
 	$(PY) -m sphinx -b html -W --keep-going -E -q docs docs/_build/html
 
 clean:
-	rm -rf $(VENV) out docs/_build docs/api/generated
+	rm -rf $(VENV) out docs/_build docs/api/abb_gym*.rst
 	find abb_gym -name '*.nbi' -delete -o -name '*.nbc' -delete
 	rm -f abb_gym/_kernels/numba-sources.sha1

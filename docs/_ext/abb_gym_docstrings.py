@@ -10,7 +10,10 @@ The docstrings are reStructuredText with two exceptions, handled here rather tha
 * the command modules (``abb_gym.cli.*``), whose docstrings are also their ``--help`` text:
   an indented block there is an example command, shown as a literal block;
 * a method that inherits its docstring from a class outside the package (Gymnasium's
-  ``Env.step``) names that method instead of parsing a docstring written for other tools.
+  ``Env.step``) names that method instead of parsing a docstring written for other tools;
+* NumPy-style ``Parameters`` entries written ``name : description`` (rather than ``name :
+  type``) get their description on the next line, before napoleon reads the section, so
+  that it is not shown as a type.
 """
 from __future__ import annotations
 
@@ -42,6 +45,38 @@ def literal_blocks(lines: list[str]) -> list[str]:
                  and not lines[i - 2].rstrip().endswith("::"))
         if opens:
             out += ["::", ""]
+        out.append(line)
+    return out
+
+
+_SECTION = ("Parameters", "Other Parameters", "Attributes")
+_TYPE_LIKE = re.compile(r"^[\w.]+( or [\w.]+)*$")
+
+
+def numpy_descriptions(lines: list[str]) -> list[str]:
+    """``lines`` with each ``name : text`` entry of a NumPy-style parameter section whose text
+    is not a type (a type is a dotted name, or several joined by "or") written as ``name``
+    and the text indented below it."""
+    out: list[str] = []
+    section_indent = None
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        indent = len(line) - len(line.lstrip())
+        nxt = lines[i + 1].strip() if i + 1 < len(lines) else ""
+        if stripped in _SECTION and nxt and set(nxt) == {"-"}:
+            section_indent = indent
+        elif section_indent is not None and stripped and indent < section_indent:
+            section_indent = None
+        elif section_indent is not None and indent == section_indent and " : " in stripped \
+                and not set(stripped) <= {"-"}:
+            name, text = stripped.split(" : ", 1)
+            if not _TYPE_LIKE.match(text.strip()):
+                out += [line[:indent] + name, line[:indent] + "    " + text]
+                continue
+        elif section_indent is not None and stripped and indent == section_indent \
+                and " : " not in stripped and not set(stripped) <= {"-"} \
+                and lines[i - 1].strip() == "":
+            section_indent = None   # a paragraph after the section
         out.append(line)
     return out
 
@@ -93,6 +128,12 @@ def process_docstring(app, what, name, obj, options, lines):
     lines[:] = [escape_bars(line) for line in lines]
 
 
+def before_napoleon(app, what, name, obj, options, lines):
+    lines[:] = numpy_descriptions(lines)
+
+
 def setup(app):
+    # napoleon reads the sections at the default priority (500): this runs first
+    app.connect("autodoc-process-docstring", before_napoleon, priority=100)
     app.connect("autodoc-process-docstring", process_docstring)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
