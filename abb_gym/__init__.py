@@ -15,7 +15,7 @@ from ._threads import quiet_openmp
 # abb_gym._threads); before numba loads
 quiet_openmp()
 
-from . import envs  # noqa: E402  registers abb_gym/RunUpTorque-v0, RunUpSpeed-v0, DwellProfile-v0
+from . import envs  # noqa: E402  registers the environment ids (abb_gym.envs.tasks)
 
 if TYPE_CHECKING:
     from .physics import (MotorDrive, Scene, SceneError, SimulationError, SpeedProfile,

@@ -72,8 +72,8 @@ def _batch():
 
 def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
     """The calls :func:`build` makes, with a label each."""
-    speed, torque, dwell = ("abb_gym/RunUpSpeed-v0", "abb_gym/RunUpTorque-v0",
-                            "abb_gym/DwellProfile-v0")
+    from .envs.tasks import DWELL_PROFILE, RUN_UP_SPEED, RUN_UP_TORQUE
+    speed, torque, dwell = RUN_UP_SPEED.env_id, RUN_UP_TORQUE.env_id, DWELL_PROFILE.env_id
     return [
         ("simulate (general kernel, every method)", _simulate),
         ("single environment (general kernel)", _env(speed)),

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .physics.simulate import Trajectory  # noqa: E402
+from .physics.trajectory import Trajectory  # noqa: E402
 
 __all__ = ["plot_runup", "plot_runup_comparison", "short_label"]
 

@@ -84,3 +84,4 @@ def train_from_mapping(data: dict, root, seed: int = 0, name: str = "run") -> in
 def train_config():
     """:func:`train_from_mapping`, for tests (and module-scoped fixtures) that train."""
     return train_from_mapping
+

@@ -23,7 +23,7 @@ pytest.importorskip("torch")
 
 from abb_gym.cli import main  # noqa: E402
 from abb_gym.rl import load_policy, make_native_env, trained_dir  # noqa: E402
-from abb_gym.rl.config import observation_kwargs  # noqa: E402
+from abb_gym.rl.env_factory import observation_kwargs  # noqa: E402
 from abb_gym.rl.agent_files import (MANIFEST, AgentError, check_folder,  # noqa: E402
                                     file_fingerprint, write_manifest)
 

@@ -1,11 +1,10 @@
 """The comparison script of the checkout, ``agents/evaluate.py`` (a repository tool: the wheel
-does not ship ``agents/*.py``): each agent is compared on its own held-out machines, with its
-own reward, against baselines tuned on its training preset, and every agent (on ``test`` as on
-``varied_test``) gets the oracle and the feedback-gap table, which regenerate the READMEs'
-marked sections."""
+does not ship ``agents/*.py``), end to end: every agent (on ``test`` as on ``varied_test``)
+gets the oracle and the feedback-gap table; the tables go to the documentation pages, and to
+the READMEs' marked sections only when asked.  Its functions are tested in
+``tests/test_feedback_gap.py`` and ``tests/test_rl_comparison.py``."""
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import json
 from pathlib import Path
@@ -14,6 +13,10 @@ import pytest
 import yaml
 
 pytest.importorskip("stable_baselines3")
+
+from abb_gym.evaluation.feedback_gap import GAP_COLUMNS, GapStudy  # noqa: E402
+from abb_gym.evaluation.results_pages import COMPARISON_MARKERS, GAP_MARKERS  # noqa: E402
+from abb_gym.rl.comparison import agent_setting, configs_folder, oracle_run  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "agents" / "evaluate.py"
@@ -28,41 +31,35 @@ def script():
     return module
 
 
-def test_each_agent_is_compared_on_its_own_held_out_machines(script):
-    plain = script.AgentSetting("runup_speed_yoshida_odd", None)
-    assert (plain.preset, plain.train_preset, plain.configs) == ("test", "train", None)
-    assert plain.env_kwargs == {"reward": {"residual": 6.0}}
-    varied = script.AgentSetting("runup_speed_yoshida_odd_varied", None)
-    assert (varied.preset, varied.train_preset) == ("varied_test", "varied")
-    assert varied.configs.name == "varied"
-    # only the families tuned on varied: no fallback to parameters tuned on another preset
-    assert varied.families(["knots", "speed_dwell", "retry"]) == ["knots", "retry"]
-    assert script.AgentSetting("runup_speed_yoshida_odd_varied", "test").preset == "test"
-    with pytest.raises(ValueError, match="tune-baselines --scene yoshida_odd --preset nowhere"):
-        script.preset_configs("nowhere", "yoshida_odd")
-
-
 def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_path, capsys):
     readme = tmp_path / "README.md"
-    readme.write_text(f"intro\n{script.GAP_BEGIN}\nold gap\n{script.GAP_END}\nend\n")
+    readme.write_text(f"intro\n{GAP_MARKERS[0]}\nold gap\n{GAP_MARKERS[1]}\nend\n")
     agents_readme = tmp_path / "agents.md"
-    agents_readme.write_text(f"head\n{script.BEGIN}\nold tables\n{script.END}\ntail\n")
-    out = tmp_path / "results"
+    agents_readme.write_text(f"head\n{COMPARISON_MARKERS[0]}\nold tables\n"
+                             f"{COMPARISON_MARKERS[1]}\ntail\n")
+    out, pages = tmp_path / "results", tmp_path / "pages"
     rc = script.main(["runup_speed_yoshida_odd_varied", "--episodes", "2", "--oracle-budget",
                       "3", "--elsewhere-draws", "2", "--machine-oracle-budget", "3",
                       "--machine-oracle-draws", "2", "--room-factors", "3",
                       "--room-budget", "2", "--baselines", "knots", "retry",
                       "resonance_dwell", "--out", str(out), "--readme", str(agents_readme),
-                      "--gap-readme", str(readme), "--workers", "1"])
+                      "--gap-readme", str(readme), "--workers", "1", "--pages", str(pages)])
     assert rc == 0
     gap = readme.read_text()
     assert gap.startswith("intro\n") and gap.endswith("end\n") and "old gap" not in gap
     assert "#### Feedback gap: yoshida_odd, varied_test" in gap
     header = next(line for line in gap.splitlines() if line.startswith("|  "))
-    assert [c.strip() for c in header.split("|")[2:-1]] == list(script.GAP_COLUMNS)
+    assert [c.strip() for c in header.split("|")[2:-1]] == list(GAP_COLUMNS)
     tables = agents_readme.read_text()
     assert "old tables" not in tables and "oracle:knots per machine" in tables
     assert "Goal against knots" in tables
+    # the same tables on the agent's page, its headings at the page's levels
+    page = (pages / "runup_speed_yoshida_odd_varied.md").read_text()
+    assert page.startswith("# runup_speed_yoshida_odd_varied: RunUpSpeed-v0 on yoshida_odd")
+    assert "\n## Feedback gap: yoshida_odd, varied_test" in page and "Goal against knots" in page
+    assert (pages / "runup_speed_yoshida_odd_varied_pareto.png").stat().st_size > 10_000
+    assert "(runup_speed_yoshida_odd_varied.md)" in (pages / "index.md").read_text()
+    assert not (pages / "training.md").exists()  # an agent named: not every agent's training
 
     report = json.loads((out / "runup_speed_yoshida_odd_varied" / "comparison.json").read_text())
     assert report["preset"] == "varied_test" and report["train_preset"] == "varied"
@@ -122,11 +119,11 @@ def test_feedback_gap_of_a_varied_agent_regenerates_both_readmes(script, tmp_pat
     # the stored oracle serves the same machines again, and is recomputed for other ones
     stored = out / "oracle" / "yoshida_odd_varied_test_seed0.json"
     before = stored.stat().st_mtime_ns
-    args = argparse.Namespace(out=str(out), seed=0, episodes=2, oracle_budget=3)
-    setting = script.AgentSetting("runup_speed_yoshida_odd_varied", None)
+    study = GapStudy(out=out, seed=0, episodes=2, oracle_budget=3)
+    setting = agent_setting("runup_speed_yoshida_odd_varied")
     capsys.readouterr()
-    with script.configs_folder(setting.configs):
-        run = script.oracle_run(setting, args)
+    with configs_folder(setting.configs):
+        run = oracle_run(setting, study)
     assert "reusing" in capsys.readouterr().out and stored.stat().st_mtime_ns == before
     assert len(run["machines"]) == 2
     # one run per start: the tuned knots and the earlier tuning the varied file lists; beside
@@ -152,12 +149,12 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
              "machines": [{"return": 0.0}, {"return": 0.0}]}
     stored.write_text(json.dumps({"runs": [other]}))
     readme = tmp_path / "README.md"
-    readme.write_text(f"{script.GAP_BEGIN}\n{script.GAP_END}\n")
-    (tmp_path / "agents.md").write_text(f"{script.BEGIN}\n{script.END}\n")
+    readme.write_text("\n".join(GAP_MARKERS) + "\n")
+    (tmp_path / "agents.md").write_text("\n".join(COMPARISON_MARKERS) + "\n")
     rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "3",
                       "--machine-oracle-budget", "0", "--elsewhere-draws", "0",
                       "--room-factors", "--baselines", "knots", "retry", "--out", str(out),
-                      "--workers", "1",
+                      "--workers", "1", "--pages", str(tmp_path / "pages"),
                       "--readme", str(tmp_path / "agents.md"), "--gap-readme", str(readme)])
     assert rc == 0
     assert "#### Feedback gap: yoshida_odd, test (RunUpSpeed-v0, trained on train)" \
@@ -177,35 +174,6 @@ def test_a_train_agent_gets_the_oracle_of_its_test_machines_kept_beside_other_re
     assert runs[1] == other
     tuned = yaml.safe_load((REPO / "configs" / "baselines" / "yoshida_odd.yaml").read_text())
     assert runs[0]["start"] == tuned["families"]["knots"]["params"]
-
-
-def test_a_gap_table_names_the_environments_only_when_they_differ(script):
-    from types import SimpleNamespace as Run
-    speed, torque = Run(env_id="abb_gym/RunUpSpeed-v0"), Run(env_id="abb_gym/RunUpTorque-v0")
-    assert script._env_note({"best open loop": speed, "oracle": speed}) == ""
-    note = script._env_note({"best open loop": torque, "PPO": torque, "oracle": speed})
-    assert note == ("  Environments (the same machines): best open loop on RunUpTorque-v0, "
-                    "PPO on RunUpTorque-v0, oracle on RunUpSpeed-v0.")
-
-
-def test_training_section_has_every_agents_cost_and_curves(script, tmp_path):
-    from abb_gym.plots import plot_training_curves
-    from abb_gym.rl import trained_dir
-    agents = sorted(d.name for d in trained_dir().iterdir() if (d / "model.zip").exists())
-    readme = tmp_path / "agents" / "README.md"
-    readme.parent.mkdir()
-    text = script.training_section(agents, tmp_path / "agents" / "results", readme)
-    rows = [line for line in text.splitlines() if line.startswith("| `")]
-    assert [r.split("`")[1] for r in rows] == agents
-    for row, agent in zip(rows, agents):
-        run = yaml.safe_load((trained_dir() / agent / "config.yml").read_text())["_run"]
-        assert f"{run['wall_time_s']:.0f} s" in row
-    assert "](results/training_curves.png)" in text
-    assert (tmp_path / "agents" / "results" / "training_curves.png").stat().st_size > 20_000
-    with pytest.raises(ValueError, match="lacks the column"):
-        plot_training_curves({"x": {"timesteps": [1.0], "return": [0.0]}}, tmp_path / "x.png")
-    with pytest.raises(ValueError, match="no training curves"):
-        plot_training_curves({}, tmp_path / "x.png")
 
 
 @pytest.mark.parametrize("flag", ["--oracle-budget", "--machine-oracle-budget",
@@ -233,3 +201,78 @@ def test_a_room_factor_out_of_range_is_refused_by_name(script, tmp_path, capsys,
     assert rc == 2
     assert "--room-factors must lie in (0, 10000] and differ from 1" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # refused before anything ran
+
+
+@pytest.mark.parametrize("flag", ["--out", "--pages"])
+def test_an_empty_output_folder_is_refused_in_one_line(script, tmp_path, monkeypatch, capsys,
+                                                       flag):
+    monkeypatch.chdir(tmp_path)  # an empty --out would have written here
+    rc = script.main(["runup_speed_yoshida_odd", "--episodes", "2", "--oracle-budget", "0",
+                      "--baselines", "knots", "--workers", "1", flag, ""])
+    assert rc == 2
+    assert capsys.readouterr().err == f"evaluate: error: {flag} must be a folder path (got '')\n"
+    assert not any(tmp_path.iterdir())
+
+
+def test_an_agent_name_after_readme_is_refused_in_one_line(script, tmp_path, capsys):
+    rc = script.main(["--readme", "runup_speed_yoshida_odd", "--out", str(tmp_path)])
+    assert rc == 2
+    assert capsys.readouterr().err == ("evaluate: error: --readme runup_speed_yoshida_odd is "
+                                       "not a file (agent names go before --readme)\n")
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.fixture
+def repository(script, tmp_path, monkeypatch):
+    """A repository whose READMEs hold the marked sections, with one shipped agent, as the
+    script's own (``agents/evaluate.py`` with no agent named evaluates every shipped one)."""
+    from abb_gym.evaluation.results_pages import TRAINING_MARKERS
+    from abb_gym.rl import trained_dir
+    repo = tmp_path / "repo"
+    (repo / "agents").mkdir(parents=True)
+    (repo / "README.md").write_text(f"intro\n{GAP_MARKERS[0]}\nold gap\n{GAP_MARKERS[1]}\n")
+    (repo / "agents" / "README.md").write_text(
+        f"{TRAINING_MARKERS[0]}\nold training\n{TRAINING_MARKERS[1]}\n"
+        f"{COMPARISON_MARKERS[0]}\nold tables\n{COMPARISON_MARKERS[1]}\n")
+    shipped = tmp_path / "trained"
+    shipped.mkdir()
+    (shipped / "runup_speed_yoshida_odd").symlink_to(trained_dir() / "runup_speed_yoshida_odd")
+    monkeypatch.setattr("abb_gym.rl.agent.trained_dir", lambda: shipped)
+    monkeypatch.setattr(script, "REPO", repo)
+    return repo
+
+
+def test_by_default_the_tables_go_to_the_docs_pages_and_no_readme_is_rewritten(
+        script, repository, tmp_path):
+    readmes = {p: p.read_text() for p in (repository / "README.md",
+                                          repository / "agents" / "README.md")}
+    rc = script.main(["--episodes", "2", "--oracle-budget", "0", "--baselines", "knots",
+                      "--out", str(tmp_path / "out"), "--workers", "1"])
+    assert rc == 0
+    assert {p: p.read_text() for p in readmes} == readmes
+    pages = repository / "docs" / "results"
+    assert sorted(p.name for p in pages.glob("*.md")) == [
+        "index.md", "runup_speed_yoshida_odd.md", "training.md"]
+    page = (pages / "runup_speed_yoshida_odd.md").read_text()
+    assert page.startswith("# runup_speed_yoshida_odd: RunUpSpeed-v0 on yoshida_odd\n")
+    assert "Goal against knots" in page and "| baseline:knots (tuned) " in page
+    assert page.endswith("(runup_speed_yoshida_odd_pareto.png)\n")
+    training = (pages / "training.md").read_text()
+    assert "| `runup_speed_yoshida_odd` |" in training and "](training_curves.png)" in training
+    assert (pages / "training_curves.png").stat().st_size > 10_000
+    index = (pages / "index.md").read_text()
+    assert "(runup_speed_yoshida_odd.md)" in index and "(training.md)" in index
+
+
+def test_readme_alone_regenerates_the_repositorys_readmes(script, repository, tmp_path):
+    rc = script.main(["--episodes", "2", "--oracle-budget", "2", "--machine-oracle-budget", "0",
+                      "--elsewhere-draws", "0", "--room-factors", "--baselines", "knots",
+                      "retry", "--out", str(tmp_path / "out"), "--workers", "1", "--readme"])
+    assert rc == 0
+    readme = (repository / "README.md").read_text()
+    assert readme.startswith("intro\n") and "old gap" not in readme
+    assert "#### Feedback gap: yoshida_odd, test (RunUpSpeed-v0, trained on train)" in readme
+    tables = (repository / "agents" / "README.md").read_text()
+    assert "old tables" not in tables and "old training" not in tables
+    assert "### runup_speed_yoshida_odd: RunUpSpeed-v0 on yoshida_odd" in tables
+    assert "](../../out/training_curves.png)" in tables

@@ -23,7 +23,8 @@ from abb_gym import MotorDrive, SceneError, SpeedProfile, load_scene, simulate
 from abb_gym.configuration import specs
 from abb_gym.physics.fluids import FLUIDS
 from abb_gym.physics.scene import ANGLE_LIMIT, Scene
-from abb_gym.physics.simulate import METHODS, SimulationError, default_step
+from abb_gym.physics.simulate import METHODS, SimulationError
+from abb_gym.physics.steps import default_step
 
 RAMP = SpeedProfile.ramp(40.0)
 

@@ -192,7 +192,7 @@ def test_shipped_scenes_and_presets_lie_above_the_imbalance_floor():
         sc = load_scene(name)
         assert sc.imbalance >= rotor.IMBALANCE_FLOOR * sc.balancing_capacity, name
     for preset in ("train", "test"):
-        lo = EnvSetup("speed", "yoshida_odd", preset).config.randomize.imbalance_ratio[0]
+        lo = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", preset).config.randomize.imbalance_ratio[0]
         assert lo >= rotor.IMBALANCE_FLOOR, preset
 
 
@@ -255,8 +255,12 @@ def test_every_shipped_scene_and_preset_is_well_inside_the_stiffness_bound(scene
     washer's test preset, needs 15 x)."""
     monkeypatch.setattr(episodes, "MAX_STIFFNESS", episodes.MAX_STIFFNESS / 5)
     for preset in ("train", "test", "nominal"):
-        for kind in ("torque", "speed", "dwell"):
-            EnvSetup(kind, scene, preset)
+        for env_id in ("abb_gym/RunUpTorque-v0", "abb_gym/RunUpSpeed-v0",
+                       "abb_gym/DwellProfile-v0"):
+            EnvSetup(env_id, scene, preset)
+    if scene == "washer":
+        for preset in ("laundry", "laundry_test"):
+            EnvSetup("abb_gym/SpinRedistribute-v0", scene, preset)
 
 
 # --------------------------------------------------------------------------- sweep commands

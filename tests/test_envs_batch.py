@@ -8,7 +8,8 @@ import abb_gym
 from abb_gym.physics import batch, drive_law as dl, model as mdl
 from abb_gym.physics import integrators as integ
 from abb_gym.physics.integrators import rk4_run
-from abb_gym.physics.simulate import default_step, initial_state
+from abb_gym.physics.simulate import initial_state
+from abb_gym.physics.steps import default_step
 
 
 def drive_cases(base):

@@ -9,7 +9,7 @@ import pytest
 
 import abb_gym  # noqa: F401  (registers the ids)
 from abb_gym.envs import PresetError, load_preset
-from abb_gym.rl.config import observation_kwargs, policy_env_fields
+from abb_gym.rl.env_factory import observation_kwargs, policy_env_fields
 
 IDS = ["abb_gym/RunUpTorque-v0", "abb_gym/RunUpSpeed-v0", "abb_gym/DwellProfile-v0"]
 TIME_INDEX = 4

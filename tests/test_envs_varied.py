@@ -10,12 +10,18 @@ import numpy as np
 import pytest
 
 import abb_gym  # noqa: F401  (registers the ids)
-from abb_gym.envs import ENV_IDS, PresetError, load_preset
+from abb_gym.envs import PresetError, load_preset
+from abb_gym.envs.tasks import TASKS
+
 from abb_gym.envs import episodes
+from abb_gym.physics import variants
 from abb_gym.envs.layout import S_AOP, S_AREF, S_XS, S_YS
 from abb_gym.physics import rotor
 from abb_gym.physics.scene import load_scene
-from abb_gym.physics.simulate import default_step
+from abb_gym.physics.steps import default_step
+
+# the ids that run on any scene (SpinRedistribute needs a washer: tests/test_spin.py)
+ENV_IDS = tuple(t.env_id for t in TASKS.values() if not t.settings)
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 SCENES = ("yoshida_odd", "spannan_cfrp")
@@ -139,12 +145,17 @@ def test_preset_ranges_are_checked_at_their_corners():
     corners = np.array([(d, r, c, s) for d in rz.ball_drag_scale
                         for r in rz.rolling_resistance_scale
                         for c in rz.critical_speed_scale for s in rz.support_damping_scale])
-    p, b = episodes.packed_rows(setup.scene, np.full(len(corners), setup.scene.imbalance),
-                                *corners.T)
-    steps = episodes._rk4_steps(setup, p, b, corners[:, 0], corners[:, 1], "test",
-                                ValueError, corners[:, 2], corners[:, 3])
+    names = ("ball_drag_scale", "rolling_resistance_scale", "critical_speed_scale",
+             "support_damping_scale")
+    values = dict(zip(names, corners.T))
+    p, b = variants.packed_variants(setup.scene, len(corners),
+                                    imbalance=np.full(len(corners), setup.scene.imbalance),
+                                    **values)
+    values["fluid_temperature"] = np.full(len(corners), setup.scene.fluid_temperature)
+    steps = episodes._rk4_steps(setup, p, b, values, "test", ValueError)
     for k, (d, r, c, s) in enumerate(corners):
-        sc = episodes.episode_scene(setup.scene, setup.scene.imbalance, d, r, c, s)
+        sc = variants.variant_scene(setup.scene, ball_drag_scale=d, rolling_resistance_scale=r,
+                                    critical_speed_scale=c, support_damping_scale=s)
         assert steps[k] == default_step(sc, setup.max_speed, "rk4")
 
 

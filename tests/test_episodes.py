@@ -13,7 +13,8 @@ from abb_gym.envs.setup import EnvSetup
 from abb_gym.envs.layout import S_AOP, S_AREF
 from abb_gym.physics import model as mdl
 from abb_gym.physics import rotor
-from abb_gym.physics.simulate import default_step
+from abb_gym.physics import variants
+from abb_gym.physics.steps import default_step, stiff_rates
 
 
 def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():
@@ -29,7 +30,7 @@ def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():
     assert np.array_equal(one_by_one, batched)
     # and draw() itself: the train preset's values in its documented order, as rng.uniform
     # would give them one by one
-    setup = EnvSetup("speed", "yoshida_odd", "train")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "train")
     rz = setup.config.randomize
     a = np.random.default_rng(5)
     ratio = a.uniform(*rz.imbalance_ratio)
@@ -38,15 +39,15 @@ def test_one_random_call_gives_the_numbers_of_uniform_one_by_one():
     drag = a.uniform(*rz.ball_drag_scale)
     roll = a.uniform(*rz.rolling_resistance_scale)
     got = episodes.draw(setup, np.random.default_rng(5), None)
-    assert got[0] == ratio * setup.scene.balancing_capacity
-    assert got[1] == episodes.reduce_angle(phase)
-    assert np.array_equal(got[2], episodes.reduce_angle(angles))
-    assert (got[3], got[4]) == (drag, roll)
+    assert got["imbalance"] == ratio * setup.scene.balancing_capacity
+    assert got["imbalance_phase"] == episodes.reduce_angle(phase)
+    assert np.array_equal(got["ball_angles"], episodes.reduce_angle(angles))
+    assert (got["ball_drag_scale"], got["rolling_resistance_scale"]) == (drag, roll)
 
 
 @pytest.mark.parametrize("scene", ["yoshida_odd", "washer", "yoshida_odd5"])
 def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
-    setup = EnvSetup("speed", scene, "train")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", scene, "train")
     sc = setup.scene
     rng = np.random.default_rng(3)
     n = 7
@@ -57,37 +58,50 @@ def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
     roll = rng.uniform(0.0, 2.0, n)
     roll[4] = 0.0  # no rolling resistance at all: the effect goes away
     roll[5] = 1.0
-    p, b = episodes.packed_rows(sc, imbalance, drag, roll)
+    p, b = variants.packed_variants(sc, n, imbalance=imbalance, ball_drag_scale=drag,
+                                    rolling_resistance_scale=roll)
     for r in range(n):
-        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r])
+        ep_scene = variants.variant_scene(sc, imbalance=imbalance[r], ball_drag_scale=drag[r],
+                                          rolling_resistance_scale=roll[r])
         p_ref, b_ref = mdl.pack_parameters(ep_scene)
         assert np.array_equal(p[r], p_ref), r
         assert np.array_equal(b[r], b_ref), r
-        assert ep_scene.reference_length == episodes.reference_length(
-            episodes.rotor_eccentricity(sc, imbalance[r:r + 1]), sc.race_eccentricity,
-            sc.balancing_capacity, sc.total_mass)[0]
-    rates = episodes.stiff_rates(p, b, setup.max_speed)
+        assert ep_scene.reference_length == variants.references(
+            sc, p[r:r + 1], setup.operating_speed, imbalance=imbalance[r:r + 1],
+            ball_drag_scale=drag[r:r + 1], rolling_resistance_scale=roll[r:r + 1]
+        ).reference_length[0]
+    rates = stiff_rates(p, b, setup.max_speed)
     steps = default_step(sc, setup.max_speed, "rk4", rate=rates)
     for r in range(n):
-        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r])
+        ep_scene = variants.variant_scene(sc, imbalance=imbalance[r], ball_drag_scale=drag[r],
+                                          rolling_resistance_scale=roll[r])
         assert steps[r] == default_step(ep_scene, setup.max_speed, "rk4")
-    # machines of another load (critical speed) and support damping: the same, bit for bit,
-    # and what a reset writes (step, reference length, reward scales, rest position)
+    # machines of another load (critical speed), support damping and, where the scene's oil
+    # has a temperature law, fluid temperature: the same, bit for bit, and what a reset
+    # writes (step, reference length, reward scales, rest position)
     crit = rng.uniform(0.9, 1.1, n)
     crit[2] = 1.0  # the nominal mass and imbalance: the nominal eccentricity
     crit[6] = 1.0
     damp = rng.uniform(0.5, 2.0, n)
     damp[0] = 1.0
-    p, b = episodes.packed_rows(sc, imbalance, drag, roll, crit, damp)
-    table = episodes.EpisodeTable(sc, n)
-    pending = episodes.prepare(setup, table, np.arange(n), imbalance, np.zeros(n),
-                               np.zeros((n, sc.ball_count)), drag, roll, crit, damp)
+    temp = np.full(n, sc.fluid_temperature)
+    if sc.fluid_preset:
+        temp = rng.uniform(293.15, 333.15, n)
+        temp[1] = sc.fluid_temperature
+    values = {"imbalance": imbalance, "ball_drag_scale": drag, "rolling_resistance_scale": roll,
+              "critical_speed_scale": crit, "support_damping_scale": damp,
+              "fluid_temperature": temp}
+    p, b = variants.packed_variants(sc, n, **values)
+    table = setup.new_table(n)
+    pending = episodes.prepare(setup, table, np.arange(n), {
+        **values, "imbalance_phase": np.zeros(n), "ball_angles": np.zeros((n, sc.ball_count))})
     for r in range(n):
-        ep_scene = episodes.episode_scene(sc, imbalance[r], drag[r], roll[r], crit[r], damp[r])
+        ep_scene = variants.variant_scene(sc, **{k: v[r] for k, v in values.items()})
         p_ref, b_ref = mdl.pack_parameters(ep_scene)
         assert np.array_equal(p[r], p_ref), r
         assert np.array_equal(b[r], b_ref), r
         assert np.array_equal(pending.p[r], p_ref), r
+        assert np.array_equal(pending.b[r], b_ref), r
         assert pending.step[r] == default_step(ep_scene, setup.max_speed, "rk4"), r
         assert pending.reference_length[r] == ep_scene.reference_length, r
         assert tuple(pending.static_deflection[r]) == rotor.static_deflection(ep_scene), r
@@ -97,7 +111,7 @@ def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
 
 
 def test_reset_options_are_checked_by_name():
-    setup = EnvSetup("speed", "yoshida_odd", "train")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "train")
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="unknown reset option"):
         episodes.draw(setup, rng, {"imbalence": 1.0})
@@ -120,28 +134,30 @@ def test_rows_drawn_at_once_are_each_rows_draw_bit_for_bit(scene, preset):
     """The autoreset draws all resetting rows at once (draw_rows); every value must be the one
     draw() gives row by row from the same generator, bit for bit, and the generators must end
     in the same state: seeded episodes do not change."""
-    setup = EnvSetup("speed", scene, preset)
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", scene, preset)
     seeds = [3, 14, 15, 92, 65]
     one = [np.random.default_rng(s) for s in seeds]
     many = [np.random.default_rng(s) for s in seeds]
     for _ in range(3):  # later draws too: the generators advance alike
         want = [episodes.draw(setup, rng, None) for rng in one]
         got = episodes.draw_rows(setup, many, [None, {}, None, {}, None])
-        for k, column in enumerate(zip(*want)):
-            assert got[k].dtype == np.array(column).dtype, k
-            assert np.array_equal(got[k], np.array(column)), (k, got[k], column)
-            assert np.array_equal(np.signbit(got[k]), np.signbit(np.array(column))), k
+        assert list(got) == list(want[0])
+        for k in got:
+            column = np.array([w[k] for w in want])
+            assert got[k].dtype == column.dtype, k
+            assert np.array_equal(got[k], column), (k, got[k], column)
+            assert np.array_equal(np.signbit(got[k]), np.signbit(column)), k
     assert [r.bit_generator.state for r in one] == [r.bit_generator.state for r in many]
 
 
 def test_rows_with_reset_options_are_drawn_row_by_row():
-    setup = EnvSetup("speed", "yoshida_odd", "varied")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "varied")
     opts = [None, {"imbalance_ratio": 0.5, "critical_speed_scale": 1.1}]
     got = episodes.draw_rows(setup, [np.random.default_rng(1), np.random.default_rng(2)], opts)
     want = [episodes.draw(setup, np.random.default_rng(s), o) for s, o in zip((1, 2), opts)]
-    for k, column in enumerate(zip(*want)):
-        assert np.array_equal(got[k], np.array(column)), k
-    assert got[5][1] == 1.1
+    for k in got:
+        assert np.array_equal(got[k], np.array([w[k] for w in want])), k
+    assert got["critical_speed_scale"][1] == 1.1
     with pytest.raises(ValueError, match="options must be a dict"):
         episodes.draw_rows(setup, [np.random.default_rng(1)], [[]])
 

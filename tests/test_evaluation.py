@@ -546,14 +546,14 @@ def test_tune_per_machine_from_a_start_never_ends_below_it():
 def test_ball_angles_drawn_as_the_preset_draws_them():
     from abb_gym.envs.episodes import draw_ball_angles
     from abb_gym.envs.setup import EnvSetup
-    setup = EnvSetup("speed", "yoshida_odd", "test")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "test")
     lo, hi = setup.config.randomize.ball_angles
     angles = draw_ball_angles(setup, np.random.default_rng(3))
     assert angles.shape == (setup.scene.ball_count,)
     assert np.all((angles >= lo) & (angles <= hi)) and len(set(angles.tolist())) == len(angles)
     np.testing.assert_array_equal(angles, draw_ball_angles(setup, np.random.default_rng(3)))
     with pytest.raises(ValueError, match="'nominal' fixes the initial ball angles"):
-        draw_ball_angles(EnvSetup("speed", "yoshida_odd", "nominal"), np.random.default_rng(3))
+        draw_ball_angles(EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "nominal"), np.random.default_rng(3))
 
 
 def test_balls_elsewhere_replays_the_same_machines_with_only_the_balls_moved():

@@ -6,7 +6,7 @@ import pytest
 from abb_gym import MotorDrive, SimulationError, SpeedProfile, load_scene, simulate
 from abb_gym.physics import integrators as integ
 from abb_gym.physics import model as mdl
-from abb_gym.physics.simulate import stiff_rate
+from abb_gym.physics.steps import stiff_rate
 
 RK4_REAL_LIMIT = 2.785  # |h lambda| on the negative real axis where RK4 stops being stable
 DWELL = SpeedProfile.dwell(accel=40.0, dwell_speed=100.0, dwell_time=0.5)

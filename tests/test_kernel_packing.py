@@ -16,7 +16,8 @@ from numba import njit, types
 import abb_gym
 
 from abb_gym.envs import kernel as K
-from abb_gym.envs.setup import Buffers, EnvSetup
+from abb_gym.envs.buffers import Buffers
+from abb_gym.envs.setup import EnvSetup
 
 
 @njit
@@ -29,7 +30,7 @@ def _fields(a):
 
 @pytest.fixture(scope="module")
 def bufs():
-    return Buffers(EnvSetup("speed", "yoshida_odd", "train"), 3, kernel="generic")
+    return Buffers(EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "train"), 3, kernel="generic")
 
 
 def test_pack_holds_the_buffers_arrays_not_copies(bufs):
@@ -145,7 +146,7 @@ def test_blocks_of_one_lane_tell_the_kernel_so(n_envs, one_lane):
     """Buffers whose blocks have one lane add SPEC_ONE_LANE to the literal effect bits (the
     lane count then compiles as the constant 1); wider blocks keep the scene's effects only."""
     from abb_gym.physics import model as mdl
-    setup = EnvSetup("speed", "yoshida_odd", "train")
+    setup = EnvSetup("abb_gym/RunUpSpeed-v0", "yoshida_odd", "train")
     b = Buffers(setup, n_envs, kernel="generic")
     assert (b.blocks.lanes == 1) == one_lane
     assert b.spec == setup.spec | (mdl.SPEC_ONE_LANE if one_lane else 0)

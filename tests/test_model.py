@@ -15,7 +15,8 @@ from abb_gym.physics import drive_law as dl
 from abb_gym.physics import model as mdl
 from abb_gym.physics.drives import MotorDrive, SpeedProfile
 from abb_gym.physics.scene import load_scene
-from abb_gym.physics.simulate import default_step, initial_state, simulate
+from abb_gym.physics.simulate import initial_state, simulate
+from abb_gym.physics.steps import default_step
 
 
 def random_scene(rng, n_balls, eccentric=True, orthotropic=True):

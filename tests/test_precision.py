@@ -20,7 +20,7 @@ import abb_gym
 from abb_gym.envs.config import PresetError, load_preset
 from abb_gym.physics import batch, drive_law as dl, elementary as el, model as mdl
 from abb_gym.physics import integrators as integ
-from abb_gym.physics.simulate import default_step
+from abb_gym.physics.steps import default_step
 from abb_gym.physics.specialise import Specialised
 
 from test_elementary import _sincos_all, _tanh_all

@@ -9,7 +9,8 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 from abb_gym.envs.config import Randomization  # noqa: E402
-from abb_gym.rl.config import TrainConfig, TrainConfigError, make_sb3_env  # noqa: E402
+from abb_gym.rl.config import TrainConfig, TrainConfigError  # noqa: E402
+from abb_gym.rl.env_factory import make_sb3_env  # noqa: E402
 from abb_gym.rl.curriculum import CurriculumCallback, fraction, narrowed  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"

@@ -12,7 +12,8 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
 from abb_gym.rl import load_config, load_policy  # noqa: E402
-from abb_gym.rl.config import TrainConfig, TrainConfigError, zoo_problems  # noqa: E402
+from abb_gym.rl.config import TrainConfig, TrainConfigError  # noqa: E402
+from abb_gym.rl.zoo import zoo_problems  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 ENTRY = {"n_envs": 2, "n_timesteps": 300, "policy": "MlpPolicy",
@@ -81,8 +82,8 @@ def test_a_started_actor_begins_at_its_initial_mean(name):
     weights shrunk 100x), and the stored constructor keeps it."""
     import torch
     from abb_gym.rl import networks
-    from abb_gym.rl.config import make_sb3_env
-    from abb_gym.rl.config import algorithm_class
+    from abb_gym.rl.algorithms import algorithm_class
+    from abb_gym.rl.env_factory import make_sb3_env
     venv = make_sb3_env(SPEED, 2, ENTRY["env_kwargs"])
     algo = "sac" if "SAC" in name else "tqc"
     model = algorithm_class(algo)(getattr(networks, name), venv, learning_starts=10,

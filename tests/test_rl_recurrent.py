@@ -13,8 +13,9 @@ pytest.importorskip("sb3_contrib")
 pytest.importorskip("torch")
 
 from abb_gym.rl import load_config, load_policy, make_native_env  # noqa: E402
-from abb_gym.rl.config import (TrainConfig, TrainConfigError, algorithm_of,  # noqa: E402
-                               zoo_problems)
+from abb_gym.rl.algorithms import algorithm_of  # noqa: E402
+from abb_gym.rl.config import TrainConfig, TrainConfigError  # noqa: E402
+from abb_gym.rl.zoo import zoo_problems  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 LSTM = "abb_gym.rl.networks.BoundedMlpLstmPolicy"

@@ -10,7 +10,8 @@ import yaml
 
 pytest.importorskip("stable_baselines3")
 
-from abb_gym.rl.config import TrainConfig, TrainConfigError, make_sb3_env  # noqa: E402
+from abb_gym.rl.config import TrainConfig, TrainConfigError  # noqa: E402
+from abb_gym.rl.env_factory import make_sb3_env  # noqa: E402
 from abb_gym.rl.shaping import PotentialShaping, potential_index  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"

@@ -24,8 +24,9 @@ from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.evaluation.registry import resolve  # noqa: E402
 from abb_gym.rl import (PPOPolicy, load_config, load_policy, make_native_env,  # noqa: E402
                         run_episodes, summarise)
-from abb_gym.rl.config import (TrainConfig, configs_dir, eval_env_kwargs,  # noqa: E402
-                               zoo_problems)
+from abb_gym.rl.config import TrainConfig, configs_dir  # noqa: E402
+from abb_gym.rl.env_factory import eval_env_kwargs  # noqa: E402
+from abb_gym.rl.zoo import zoo_problems  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"
 

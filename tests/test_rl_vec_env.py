@@ -17,7 +17,7 @@ pytest.importorskip("torch")
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize  # noqa: E402
 
 import abb_gym  # noqa: E402,F401
-from abb_gym.rl.config import make_native_env, make_sb3_env  # noqa: E402
+from abb_gym.rl.env_factory import make_native_env, make_sb3_env  # noqa: E402
 from abb_gym.rl.vec_env import NativeVecEnv, split_info  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"

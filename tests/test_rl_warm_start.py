@@ -15,7 +15,8 @@ pytest.importorskip("torch")
 
 from abb_gym.cli import main as cli_main  # noqa: E402
 from abb_gym.rl.agent_files import AgentError  # noqa: E402
-from abb_gym.rl.config import TrainConfig, TrainConfigError, make_sb3_env  # noqa: E402
+from abb_gym.rl.config import TrainConfig, TrainConfigError  # noqa: E402
+from abb_gym.rl.env_factory import make_sb3_env  # noqa: E402
 from abb_gym.rl.warm_start import load_warm_start, warm_start_files  # noqa: E402
 
 SPEED = "abb_gym/RunUpSpeed-v0"

@@ -1,4 +1,4 @@
-"""rl-baselines3-zoo and the PPO config format (``abb_gym/rl/config.py``).
+"""rl-baselines3-zoo and the PPO config format (``abb_gym/rl/config.py``, ``abb_gym/rl/zoo.py``).
 
 * rl_zoo3 trains every shipped ``configs/ppo/*.yml`` unchanged, with the hyperparameters and
   the policy ``abb-gym train`` reads from the same file (skipped, with the reason, only when
@@ -29,7 +29,8 @@ pytest.importorskip("torch")
 import abb_gym  # noqa: E402
 from abb_gym.rl import load_config, trained_dir  # noqa: E402
 from abb_gym.rl.config import (ABB_GYM_SECTION, TrainConfig, TrainConfigError,  # noqa: E402
-                               configs_dir, resolve_policy_kwargs, zoo_problems)
+                               configs_dir, resolve_policy_kwargs)
+from abb_gym.rl.zoo import zoo_problems  # noqa: E402
 
 CONFIGS = sorted(configs_dir().glob("*.yml"))
 AGENTS = sorted(d for d in trained_dir().glob("*") if (d / "config.yml").exists())
@@ -158,7 +159,7 @@ def test_rl_zoo3_trains_the_shipped_config_unchanged(path, env_id, tmp_path):
     pytest.importorskip("rl_zoo3", reason="rl_zoo3 is not installed (pip install -c "
                                           "constraints.txt rl_zoo3): the zoo cannot be run")
     from torch import nn
-    from abb_gym.rl.config import OFF_POLICY, algorithm_class
+    from abb_gym.rl.algorithms import OFF_POLICY, algorithm_class
     from abb_gym.rl.networks import policy_class
 
     cfg = load_config(path, env_id)

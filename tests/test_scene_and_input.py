@@ -7,7 +7,7 @@ import pytest
 import abb_gym
 from abb_gym import SceneError, SimulationError, SpeedProfile, load_scene, simulate
 from abb_gym.physics.drives import MotorDrive
-from abb_gym.physics.simulate import state_names
+from abb_gym.physics.trajectory import state_names
 
 
 @pytest.mark.parametrize("name", abb_gym.list_scenes())

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene
-from ..physics.simulate import Trajectory, simulate
+from ..physics.simulate import simulate
+from ..physics.trajectory import Trajectory
 from .groups import Groups
 from .rotating_frame import balanced_target, coefficients
 

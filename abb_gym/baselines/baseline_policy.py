@@ -254,9 +254,14 @@ class _LazyBaseline:
         return self._inner.act(obs, info)
 
 
-def load_baseline(name: str, env_id: str | None = None, scene: Any = None, **_: Any
-                  ) -> _LazyBaseline:
-    """The policy of ``baseline:NAME`` (the ``abb_gym.policies`` entry point)."""
+def load_baseline(name: str, env_id: str | None = None, scene: Any = None, **_: Any):
+    """The policy of ``baseline:NAME`` (the ``abb_gym.policies`` entry point): a family
+    (:data:`FAMILY_NAMES`, tuned parameters where there are) or ``laundry_oracle``
+    (:mod:`abb_gym.baselines.laundry`)."""
+    from .laundry import ORACLE_NAME, LaundryOracle
+    if name == ORACLE_NAME:
+        return LaundryOracle()
     if name not in FAMILY_NAMES:
-        raise ValueError(f"unknown baseline {name!r}; available: {', '.join(FAMILY_NAMES)}")
+        raise ValueError(f"unknown baseline {name!r}; available: "
+                         f"{', '.join((*FAMILY_NAMES, ORACLE_NAME))}")
     return _LazyBaseline(name, scene)

@@ -21,7 +21,19 @@ family                 controller
                        the amplitude has fallen ``drop`` below a peak of at least
                        ``min_amplitude``, the speed at the peak is the critical speed: go back
                        to ``dwell_ratio`` times it, dwell ``dwell_time``, then run up
+``retry_at_spin``      ``retry`` for a washer whose laundry redistributes: the dip stops the
+                       drum (``dip_speed`` 0, below the tumble speed) for ``dip_time``, longer
+                       than the tumble time, so each retry lands the laundry anew
+``redistribute_low``   the firmware's unbalance check at the distribution speed: run up to
+                       ``distribution_speed`` (below the critical speed), hold it
+                       ``measure_time``; if the filtered vibration is above ``threshold``,
+                       stop the drum for ``tumble_hold`` (the laundry redistributes) and
+                       measure again, at most ``max_redistributions`` times; then run up
 =====================  =====================================================================
+
+The two laundry rules act on ``abb_gym/SpinRedistribute-v0`` (:mod:`abb_gym.envs.spin`): their
+defaults read the preset's tumble time; their thresholds are tuned on the ``laundry`` preset
+(``abb-gym tune-baselines``).
 
 The check of ``retry`` must come before the environment's settling window ends (an unbroken
 ``settle_time`` in the band completes the run-up), so ``check_time`` is searched below it.
@@ -36,7 +48,8 @@ import numpy as np
 from ..configuration import declare
 from .profiles import Family, default_accel
 
-__all__ = ["CLOSED_LOOP", "Retry", "ResonanceDwell", "Controller"]
+__all__ = ["CLOSED_LOOP", "Retry", "ResonanceDwell", "RetryAtSpin", "RedistributeLow",
+           "Controller"]
 
 
 def _accel():
@@ -222,4 +235,120 @@ class ResonanceDwell(Family):
         return _ResonanceController(families, setup)
 
 
-CLOSED_LOOP: dict[str, type[Family]] = {f.name: f for f in (Retry, ResonanceDwell)}
+def _tumble_time(setup: Any) -> float:
+    """The preset's tumble time [s] (the redistribution's; 4 s without one)."""
+    return float(setup.config.redistribution.tumble_time)
+
+
+class _RetryAtSpinController(_RetryController):
+    def __init__(self, families, setup):
+        super().__init__(families, setup)
+        hold = _tumble_time(setup) + 1.0
+        self.dip_speed = np.array([0.0 if f.dip_speed is None else f.dip_speed
+                                   for f in families])
+        self.dip_time = np.array([hold if f.dip_time is None else f.dip_time for f in families])
+        self.max_retries = np.array([3 if f.max_retries is None else f.max_retries
+                                     for f in families])
+
+
+class _RedistributeLowController(Controller):
+    TO_DIST, MEASURE, STOP, TUMBLE, RUNUP = range(5)
+
+    def __init__(self, families, setup):
+        super().__init__(families, setup)
+        wc = setup.scene.critical_speed
+        self.w_dist = np.array([0.6 * wc if f.distribution_speed is None
+                                else min(f.distribution_speed, self.wop) for f in families])
+        self.measure_time = np.array([5.0 if f.measure_time is None else f.measure_time
+                                      for f in families])
+        self.threshold = np.array([np.inf if f.threshold is None else f.threshold
+                                   for f in families])
+        hold = _tumble_time(setup) + 1.0
+        self.tumble_hold = np.array([hold if f.tumble_hold is None else f.tumble_hold
+                                     for f in families])
+        self.max_redist = np.array([3 if f.max_redistributions is None
+                                    else f.max_redistributions for f in families])
+        self.done = np.zeros(self.n, dtype=np.int64)
+
+    def reset(self, mask):
+        super().reset(mask)
+        self.done[mask] = 0
+
+    def references(self, obs):
+        amp = obs[:, 3]
+        for i in range(self.n):
+            ph = self.phase[i]
+            if ph == self.TO_DIST:
+                if self._toward(i, self.w_dist[i]):
+                    self.phase[i], self.timer[i] = self.MEASURE, 0.0
+            elif ph == self.MEASURE:
+                self.timer[i] += self.dt
+                if self.timer[i] >= self.measure_time[i] - 1e-12:
+                    if amp[i] > self.threshold[i] and self.done[i] < self.max_redist[i]:
+                        self.done[i] += 1
+                        self.phase[i] = self.STOP
+                    else:
+                        self.phase[i] = self.RUNUP
+            elif ph == self.STOP:
+                if self._toward(i, 0.0):
+                    self.phase[i], self.timer[i] = self.TUMBLE, 0.0
+            elif ph == self.TUMBLE:
+                self.timer[i] += self.dt
+                if self.timer[i] >= self.tumble_hold[i] - 1e-12:
+                    self.phase[i] = self.TO_DIST
+            else:
+                self._toward(i, self.wop)
+        return self.ref.copy()
+
+
+@dataclass(frozen=True)
+class RetryAtSpin(Retry):
+    name: ClassVar[str] = "retry_at_spin"
+    threshold: float | None = declare(None, gt=0.0, le=1e3, nullable=True,
+                                      doc="filtered vibration at spin (obs[3], x A_v) above "
+                                          "which it retries (default: never)",
+                                      search=(0.005, 0.3, "aop"))
+    dip_speed: float | None = declare(None, unit="rad/s", ge=0.0, le=1e5, nullable=True,
+                                      doc="speed of the dip (default 0: the drum stops, below "
+                                          "the tumble speed)")
+    dip_time: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                     doc="hold at the dip speed (default the preset's tumble "
+                                         "time + 1 s)")
+    max_retries: int | None = declare(None, kind="integer", ge=0, le=10, nullable=True,
+                                      doc="most retries (default 3)")
+
+    @staticmethod
+    def controller(families, setup) -> Controller:
+        return _RetryAtSpinController(families, setup)
+
+
+@dataclass(frozen=True)
+class RedistributeLow(Family):
+    name: ClassVar[str] = "redistribute_low"
+    closed_loop: ClassVar[bool] = True
+    accel: float | None = _accel()
+    distribution_speed: float | None = declare(
+        None, unit="rad/s", gt=0.0, le=1e5, nullable=True,
+        doc="speed of the unbalance check, below the critical speed (default 0.6 omega_c)",
+        search=(0.3, 0.9, "wc"))
+    measure_time: float | None = declare(None, unit="s", gt=0.0, le=1e3, nullable=True,
+                                         doc="hold at the distribution speed before the check "
+                                             "(default 5 s)", search=(1.0, 10.0, "1"))
+    threshold: float | None = declare(None, gt=0.0, le=1e3, nullable=True,
+                                      doc="filtered vibration (obs[3], x A_v) above which the "
+                                          "laundry is redistributed (default: never)",
+                                      search=(0.02, 1.0, "1"))
+    tumble_hold: float | None = declare(None, unit="s", ge=0.0, le=1e4, nullable=True,
+                                        doc="time at rest that redistributes (default the "
+                                            "preset's tumble time + 1 s)")
+    max_redistributions: int | None = declare(None, kind="integer", ge=0, le=10,
+                                              nullable=True,
+                                              doc="most redistributions (default 3)")
+
+    @staticmethod
+    def controller(families, setup) -> Controller:
+        return _RedistributeLowController(families, setup)
+
+
+CLOSED_LOOP: dict[str, type[Family]] = {f.name: f for f in (Retry, ResonanceDwell, RetryAtSpin,
+                                                            RedistributeLow)}

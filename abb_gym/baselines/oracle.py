@@ -172,7 +172,7 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     _check_counts(draws=draws)
     machines = run["machines"] if episodes is None else run["machines"][:episodes]
     env_kwargs = run.get("env_kwargs") or {}
-    setup = EnvSetup("speed", run["scene"], run["preset"], overrides=env_kwargs)
+    setup = EnvSetup(ENV_ID, run["scene"], run["preset"], overrides=env_kwargs)
     kw = tuple(sorted(env_kwargs.items()))
     name = oracle_name(run.get("family", "knots"))
     results = tuple(EvaluationResult(f"{label}, balls started elsewhere", ENV_ID, run["scene"],

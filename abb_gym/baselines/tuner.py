@@ -28,20 +28,19 @@ import yaml
 from tqdm import tqdm
 
 from ..evaluation.evaluate import Chunk, check_inputs, run_chunk
+from ..envs import tasks
 from ..physics import rotor
 from . import profiles
 from .baseline_policy import BaselinePolicy, ClosedLoopPolicy
 from .families import FAMILY_NAMES, build_family, family_class
 
-ENV_ID = "abb_gym/RunUpSpeed-v0"
+ENV_ID = tasks.DEFAULT_ENV_ID
 OBJECTIVE = "mean return on the preset (the environment's reward)"
 # restart r of a tuning seeds its CMA-ES with seed + RUN_SEED_STRIDE * r: a prime, so that no
 # restart repeats the search of a tuning run with a nearby seed
 RUN_SEED_STRIDE = 7919
 
 
-_KINDS = {"abb_gym/RunUpSpeed-v0": "speed", "abb_gym/RunUpTorque-v0": "torque",
-          "abb_gym/DwellProfile-v0": "dwell"}
 # the stream of the ball-angle draws a per-machine search scores on (``ball_draws``), apart
 # from every episode seed and from the draws of :func:`abb_gym.baselines.oracle.balls_elsewhere`
 SEARCH_BALLS_STREAM = 0x0BA12
@@ -61,7 +60,7 @@ def search_scales(scene_name: str, env_id: str = ENV_ID, preset: str = "train"
                   ) -> dict[str, float]:
     """The units of the search boxes for a scene and environment preset."""
     from ..envs.setup import EnvSetup
-    setup = EnvSetup(_KINDS[env_id], scene_name, preset)
+    setup = EnvSetup(env_id, scene_name, preset)
     sc = setup.scene.replace(drive_operating_speed=setup.operating_speed)
     out = profiles.scales(sc)
     a_peak, a_op = rotor.reference_amplitudes(sc, setup.operating_speed)
@@ -492,7 +491,7 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     scales = search_scales(scene_name, env_id, preset)
     if ball_draws:
         from ..envs.setup import EnvSetup
-        setup = EnvSetup(_KINDS[env_id], scene_name, preset, overrides=env_kwargs)
+        setup = EnvSetup(env_id, scene_name, preset, overrides=env_kwargs)
     tasks = [MachineSearch(scene_name, family, k, seed, preset, budget, env_id, kw, start,
                            scales, ball_starts(setup, seed + k, SEARCH_BALLS_STREAM, ball_draws)
                            if ball_draws else ((),))

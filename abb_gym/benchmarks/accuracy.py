@@ -19,7 +19,9 @@ from tqdm import tqdm
 from ..physics import MotorDrive, SimulationError, SpeedProfile, list_scenes, load_scene
 from ..physics import model as mdl
 from ..physics import simulate
-from ..physics.simulate import Trajectory, default_step, drive_max_speed, initial_state
+from ..physics.simulate import initial_state
+from ..physics.steps import default_step, drive_max_speed
+from ..physics.trajectory import Trajectory
 
 OUTPUT_DT = 0.01  # s, the environments' control interval
 

@@ -27,7 +27,9 @@ from typing import Iterator
 import gymnasium as gym
 import numpy as np
 
-ENV_ID = "abb_gym/RunUpSpeed-v0"
+from ..envs import tasks
+
+ENV_ID = tasks.DEFAULT_ENV_ID
 SCENE = "yoshida_odd"
 EPISODE_STEPS = 100  # 1 s episodes at 10 ms: resets are 1 % of the sub-environment steps
 VECTOR_SIZES = (64, 1024, 4096)
@@ -166,7 +168,7 @@ def _fresh_process(code: str, env: dict | None = None) -> float:
     return wall
 
 
-FIRST_STEP = ("import gymnasium as gym, abb_gym; e = gym.make('abb_gym/RunUpSpeed-v0'); "
+FIRST_STEP = (f"import gymnasium as gym, abb_gym; e = gym.make({ENV_ID!r}); "
               "e.reset(seed=0); e.step(e.action_space.sample())")
 
 

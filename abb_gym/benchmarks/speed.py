@@ -25,7 +25,8 @@ from scipy.integrate import solve_ivp
 from ..physics import SpeedProfile, load_scene, simulate
 from ..physics import integrators as integ
 from ..physics import model as mdl
-from ..physics.simulate import default_step, initial_state
+from ..physics.simulate import initial_state
+from ..physics.steps import default_step
 from .numpy_reference import yoshida_rhs
 
 CONTROL_DT = 0.01  # s

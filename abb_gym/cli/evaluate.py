@@ -18,12 +18,14 @@ from __future__ import annotations
 import argparse
 
 from ..execution.cli import add_executor_arguments, executor_from_args
+from ..envs import tasks
 
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="evaluate policies and baselines on a seeded test set",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="abb_gym/RunUpSpeed-v0", help="environment id")
+    p.add_argument("--env", default=tasks.DEFAULT_ENV_ID,
+                   help=f"environment id (one of {', '.join(tasks.TASKS)})")
     p.add_argument("--scene", default="yoshida_odd", help="scene name")
     p.add_argument("--policy", action="append", required=True,
                    help="baseline:NAME, ppo:NAME|PATH or replay:SPEC (repeatable)")
@@ -69,8 +71,7 @@ def run(args) -> int:
         from ..baselines.tuner import sweep
         sweep_rows = sweep(args.scene, n=args.sweep, episodes=args.sweep_episodes,
                            seed=args.seed, preset=args.preset, executor=ex,
-                           env_id=args.env if args.env != "abb_gym/DwellProfile-v0"
-                           else "abb_gym/RunUpSpeed-v0")
+                           env_id=tasks.get(args.env).baselines_on or args.env)
     paths = write_report(results, args.out, sweep_rows)
     print(summary_table(results))
     print("wrote " + ", ".join(str(p) for p in paths.values()))

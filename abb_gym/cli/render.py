@@ -18,11 +18,14 @@ import math
 import re
 import sys
 
+from ..envs import tasks
+
 
 def register(sub) -> None:
     p = sub.add_parser("render", help="write one episode of a policy as a GIF or MP4 video",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="abb_gym/RunUpSpeed-v0", help="environment id")
+    p.add_argument("--env", default=tasks.DEFAULT_ENV_ID,
+                   help=f"environment id (one of {', '.join(tasks.TASKS)})")
     p.add_argument("--scene", default="yoshida_odd", help="scene name")
     p.add_argument("--preset", default="test", help="environment preset")
     p.add_argument("--policy", required=True, help="baseline:NAME, ppo:NAME|PATH or replay:SPEC")
@@ -51,9 +54,9 @@ def run(args) -> int:
     out = args.out or default_out(args.scene, args.policy, args.episode)
     check_video(out, args.fps)  # suffix, fps and the extra before any folder is made
     output_file(out, "--out")
-    if args.env == "abb_gym/DwellProfile-v0":
-        print("abb-gym render: note: a DwellProfile episode is one step (its whole run-up): "
-              "the video has two frames, before and after", file=sys.stderr)
+    if tasks.get(args.env).one_step:
+        print(f"abb-gym render: note: a {tasks.get(args.env).name} episode is one step (its "
+              f"whole run-up): the video has two frames, before and after", file=sys.stderr)
     res = render_episode(args.env, args.scene, args.policy, out, episode=args.episode,
                          seed=args.seed, preset=args.preset, fps=args.fps, every=args.every,
                          steps=args.steps)

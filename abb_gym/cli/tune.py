@@ -13,11 +13,15 @@ from __future__ import annotations
 import argparse
 
 from ..execution.cli import add_executor_arguments
+from ..envs import tasks
 from .evaluate import _executor
 
 
+# the baseline families by name: abb_gym.baselines.families.FAMILY_NAMES, spelled out here
+# because the command line is built before numba loads (tests/test_registry.py holds the two
+# together)
 FAMILIES = ("ramp", "speed_dwell", "accel_dwell", "decel_dwell", "speed_reduction", "knots",
-            "retry", "resonance_dwell")
+            "retry", "resonance_dwell", "retry_at_spin", "redistribute_low")
 
 
 def register(sub) -> None:
@@ -26,8 +30,7 @@ def register(sub) -> None:
     p.add_argument("--scene", default="yoshida_odd", help="scene name or YAML path")
     p.add_argument("--family", action="append", choices=FAMILIES,
                    help="families to tune (repeatable; default all)")
-    p.add_argument("--env", default="abb_gym/RunUpSpeed-v0",
-                   choices=["abb_gym/RunUpSpeed-v0", "abb_gym/RunUpTorque-v0"],
+    p.add_argument("--env", default=tasks.DEFAULT_ENV_ID, choices=tasks.task_ids(open_loop=True),
                    help="environment whose return is the objective")
     p.add_argument("--budget", type=int, default=240,
                    help="candidates per family (CMA-ES evaluations)")
@@ -57,7 +60,7 @@ def _check_episode_memory(args, env_kwargs) -> None:
     """The episodes of one candidate run as the sub-environments of one vector environment
     with their histories: ``--episodes 1e12`` would fill the memory (or hang building the
     episode list) long before the first candidate; refused here, naming the option."""
-    from ..envs.setup import check_memory
+    from ..envs.checks import check_memory
     from ..evaluation.evaluate import make_env
     env = make_env(args.env, args.scene, args.preset, 1, **env_kwargs)
     try:

@@ -13,8 +13,11 @@ dwell      dwell start speed, length and acceleration of a whole run-up profile,
 
 Each kind is an :class:`ActionModel` (the Python side: sizes, bounds, episode length, the
 rows at reset and before a step) plus its branch of the compiled :func:`write_interval_row`
-and :func:`whole_episode`.  Adding an action type means adding both here, and a thin
-environment module that documents it.
+and :func:`whole_episode`.  A new action type either adds both here, or is an
+:class:`ActionModel` with ``kind_id = KIND_ROWS`` whose :meth:`~ActionModel.before_step`
+writes each interval's drive rows from Python (no compiled change, at a few microseconds per
+row and step), registered with :func:`register_action_model`; a task then names it
+(:mod:`abb_gym.envs.tasks`).
 """
 from __future__ import annotations
 
@@ -31,12 +34,16 @@ from .config import PresetError
 from .layout import S_J, S_NSEG
 
 __all__ = ["ActionModel", "ACTION_MODELS", "KIND_TORQUE", "KIND_SPEED", "KIND_DWELL",
-           "write_interval_row", "whole_episode", "dwell_profile", "dwell_action",
-           "action_model", "checked_action"]
+           "KIND_ROWS", "write_interval_row", "whole_episode", "rows_from_python",
+           "dwell_profile", "dwell_action", "action_model", "checked_action",
+           "register_action_model"]
 
 KIND_TORQUE = 0
 KIND_SPEED = 1
 KIND_DWELL = 2
+# an action model whose Python side writes each control interval's drive rows
+# (:meth:`ActionModel.before_step`): a new action semantic needs no compiled branch
+KIND_ROWS = 3
 
 
 # --------------------------------------------------------------------------- compiled side
@@ -44,6 +51,13 @@ KIND_DWELL = 2
 def whole_episode(kind):
     """True if one action decides the whole episode (the step runs it to its end)."""
     return kind == KIND_DWELL
+
+
+@njit(cache=True, inline="always")
+def rows_from_python(kind):
+    """True if the Python side wrote the drive rows of the step (the compiled step keeps
+    them)."""
+    return kind == KIND_DWELL or kind == KIND_ROWS
 
 
 @njit(cache=True, inline="always")
@@ -142,6 +156,11 @@ class ActionModel:
         """True if this kind overrides :meth:`before_step` (the others skip the call)."""
         return type(self).before_step is not ActionModel.before_step
 
+    @property
+    def whole_episode_action(self) -> bool:
+        """True if one action decides the whole episode (an episode is one step)."""
+        return self.kind_id == KIND_DWELL
+
 
 class TorqueAction(ActionModel):
     name = "torque"
@@ -207,6 +226,16 @@ class DwellAction(ActionModel):
 
 ACTION_MODELS: dict[str, ActionModel] = {m.name: m for m in (TorqueAction(), SpeedAction(),
                                                              DwellAction())}
+
+
+def register_action_model(model: ActionModel) -> ActionModel:
+    """Add an action model by its name (a task names it: :mod:`abb_gym.envs.tasks`).  A model
+    with ``kind_id = KIND_ROWS`` writes each interval's drive rows in :meth:`before_step`, so
+    it needs no change of the compiled step."""
+    if not model.name:
+        raise ValueError("an action model needs a name")
+    ACTION_MODELS[model.name] = model
+    return model
 
 
 def _lerp(rng, u: float) -> float:

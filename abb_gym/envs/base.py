@@ -22,9 +22,11 @@ from .info import step_info
 from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
                      T_BALLS)
 from .rendering import Renderer
-from . import episodes
-from .episodes import Episode, EpisodeTable
-from .setup import Buffers, EnvSetup, SetupAccess, check_flag, check_seed, draw_safely
+from . import episode_parameters, episodes, observation
+from .buffers import Buffers
+from .checks import check_flag, check_seed, draw_safely
+from .episodes import Episode
+from .setup import EnvSetup, SetupAccess
 
 COMMON_DOC = textwrap.dedent(r"""
     ## Observation Space
@@ -34,19 +36,10 @@ COMMON_DOC = textwrap.dedent(r"""
     resonance of the same rotor without balls, with the scene's imbalance (a fixed scale per
     environment), ``c`` the housing clearance, ``w_op`` the operating speed.
 
-    | Index | Name | Definition | Bounds |
-    |-------|------|------------|--------|
-    | 0 | rotor_speed | w / w_op | [0, 1]; RunUpTorque [-overspeed, overspeed] |
-    | 1 | vibration_x | (x - x_rest) / A_v, housing displacement, fixed frame | [-c/A_v, c/A_v] |
-    | 2 | vibration_y | (y - y_rest) / A_v | [-c/A_v, c/A_v] |
-    | 3 | vibration_amplitude | filtered whirl radius / A_v | [0, c/A_v] |
-    | 4 | time_fraction | t / episode_length; left out with ``observe_time: false`` (every later index one lower) | [0, 1] |
-    | 5 .. 4+A | last_action | the last action after clipping | [-1, 1] |
-    | 5+A | sync_amplitude | synchronous (1x) vibration amplitude / A_v; only with ``sync_vibration.enabled`` | [0, c/A_v] |
-    | 6+A, 7+A | sync_cos, sync_sin | its phase from the rotor's reference mark | [-1, 1] |
-    | then | cos, sin(ball_angle[i]) | only with ``observe_balls=True`` | [-1, 1] |
+    {observation_table}
 
-    A is the action size (1; DwellProfile 3).  ``(x_rest, y_rest)`` is the rest position of
+    The entries in this order (one left out moves the later ones up; the action size is 1,
+    DwellProfile 3).  ``(x_rest, y_rest)`` is the rest position of
     the rotor centre: the origin, or the static sag under gravity (horizontal-axis scenes);
     the vibration radius is the distance from it (equal to the whirl radius without gravity).
     The vibration amplitude is the vibration radius passed through a first-order low-pass of
@@ -112,14 +105,18 @@ COMMON_DOC = textwrap.dedent(r"""
     The rotor is at rest at its rest position (x = y = 0; under gravity the static sag
     x = M g_x / k_x, y = M g_y / k_y), all speeds 0.  The rotor angle is the
     imbalance phase, the balls sit at their initial angles (measured from the imbalance).  The
-    imbalance magnitude and phase, ball angles, race drag and rolling resistance are drawn from
-    the preset's ``randomize`` ranges with ``self.np_random``, and so (where the preset
-    randomises them, ``varied``) are the critical speed, through the supported mass
-    (``critical_speed_scale`` s: M / s^2, :mod:`abb_gym.envs.config`), and the support damping;
-    ``reset(options=...)`` sets exact values: ``imbalance`` [kg m] or ``imbalance_ratio``
-    (x balancing capacity), ``imbalance_phase`` [rad], ``ball_angles`` [rad],
-    ``ball_drag_scale``, ``rolling_resistance_scale``, ``critical_speed_scale``,
-    ``support_damping_scale``.  Under gravity the rest position is the episode's own sag.
+    episode parameters below are drawn from the preset's ``randomize`` ranges with
+    ``self.np_random`` (in this order, one ``random`` call), or set exactly by the reset option
+    of the same name (:mod:`abb_gym.envs.episode_parameters`); a range left null keeps the
+    scene's value.
+
+    {episode_table}
+
+    The critical speed changes through the supported mass (``critical_speed_scale`` s:
+    M / s^2, :mod:`abb_gym.envs.config`).  With redistribution of the laundry
+    (:mod:`abb_gym.envs.redistribution`) the episode also draws its redistributions, and the
+    reset option ``redistributions`` fixes them.
+    Under gravity the rest position is the episode's own sag.
 
     ## Episode End
 
@@ -172,10 +169,9 @@ COMMON_DOC = textwrap.dedent(r"""
     | residual_imbalance_ratio | abs(U0 + sum m_i (E e^{i gam} + R e^{i ph_i})) / U0 |
     | failure | only on a failure: what happened |
 
-    At reset, ``info`` also holds the episode's parameters (``imbalance``, ``imbalance_phase``,
-    ``initial_ball_angles``, ``ball_drag_scale``, ``rolling_resistance_scale``,
-    ``critical_speed_scale``, ``support_damping_scale``, ``integration_step``,
-    ``static_deflection``); ``env.unwrapped.episode_scene`` is the episode as a Scene.
+    At reset, ``info`` also holds the episode's parameters (the table under Starting State, by
+    their info keys), ``integration_step`` and ``static_deflection``;
+    ``env.unwrapped.episode_scene`` is the episode as a Scene.
 
     ## Arguments
 
@@ -205,22 +201,26 @@ COMMON_DOC = textwrap.dedent(r"""
     preset whose ``randomize`` ranges allow such episodes is refused when the environment is
     made (:mod:`abb_gym.envs.episodes`).
 """)
+COMMON_DOC = COMMON_DOC.replace("{observation_table}", observation.doc_table()).replace(
+    "{episode_table}", episode_parameters.doc_table())
 __doc__ += COMMON_DOC
 
 
 class BalancerEnv(SetupAccess, gym.Env):
-    """Common implementation; use the registered subclasses."""
+    """Common implementation of every task; ``gym.make`` with a registered id, or a subclass
+    that names its task."""
 
     metadata = SINGLE_METADATA
-    kind = "speed"
+    #: the registered id this class makes (:mod:`abb_gym.envs.tasks`); ``task=`` overrides it
+    task_id: str | None = None
 
-    def __init__(self, scene: Any = "yoshida_odd", preset: Any = "train", *,
+    def __init__(self, scene: Any = None, preset: Any = None, *, task: str | None = None,
                  observe_balls: bool = False, render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
                  info_level: str = "lean", **overrides: Any):
         info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
-        self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
-                              overrides)
+        self.setup = EnvSetup(task or self.task_id, scene, preset, observe_balls,
+                              max_episode_steps, overrides)
         self.info_level = info_level
         if self.setup.config.precision != "float64":
             raise ValueError(
@@ -238,7 +238,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         check_flag(record_history, "record_history")
         self._bufs = Buffers(self.setup, 1, n_trace=1 if (render_mode or record_history) else 0)
         self._renderer: Renderer | None = None
-        self._table = EpisodeTable(self.setup.scene, 1)
+        self._table = self.setup.new_table(1)
         self._episode: Episode | None = None
         self._done = False
         self._warned_clip = False

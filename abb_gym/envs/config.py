@@ -24,7 +24,7 @@ scene-derived default exists):
 A ``randomize`` entry is ``[lo, hi]`` (uniform, drawn from the environment's ``np_random``),
 one number (fixed), or ``null`` (the scene's value).  A preset may name a ``base`` preset whose
 fields it overrides.  Keyword arguments override any field; the nested sections ``reward``,
-``dwell``, ``randomize`` and ``sync_vibration`` are merged key by key
+``dwell``, ``randomize``, ``sync_vibration`` and ``redistribution`` are merged key by key
 (``randomize={"imbalance_ratio": None}`` switches one entry off,
 ``sync_vibration={"enabled": True}`` adds the synchronous vibration to the observation).
 Errors name the field and the allowed range.
@@ -55,21 +55,25 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, make_dataclass
 from typing import Any, Mapping
 
 from .. import resources
 from ..physics.methods import PRECISIONS
 from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
                              read_yaml, specs)
+from .episode_parameters import randomize_fields
 
 __all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "SyncVibration",
-           "load_preset",
+           "Redistribution", "load_preset",
            "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS",
            "PRECISIONS"]
 
 Range = tuple[float, float]
 INTEGRATORS = ("rk4", "etdrk4")
+#: largest ``redistribution.max_count`` (the compiled step keeps the drawn redistributions in
+#: each row's bookkeeping: :mod:`abb_gym.envs.layout`)
+MAX_REDISTRIBUTIONS = 8
 PI = math.pi
 
 
@@ -95,6 +99,9 @@ class RewardWeights:
     residual: float = declare(2.0, ge=0.0, le=1e6,
                               doc="weight of the terminal residual-vibration term")
     failure: float = declare(10.0, ge=0.0, le=1e6, doc="fixed part of the failure penalty")
+    length_scale: float | None = declare(None, unit="m", gt=0.0, le=10.0, nullable=True,
+                                         doc="vibration and residual in this unit of length; "
+                                             "null = the machine's reference amplitudes")
 
 
 @dataclass(frozen=True)
@@ -112,32 +119,20 @@ class DwellRanges:
                                  doc="dwell acceleration / ramp acceleration")
 
 
-@dataclass(frozen=True)
-class Randomization:
-    imbalance_ratio: Range | None = declare(None, kind="range", gt=0.0, le=100.0,
-                                            nullable=True,
-                                            doc="imbalance / balancing capacity (sum m_i R)")
-    imbalance_phase: Range | None = declare(None, kind="range", unit="rad", ge=-2 * PI,
-                                            le=2 * PI, nullable=True,
-                                            doc="angle of the imbalance at t = 0 (fixed frame)")
-    ball_angles: Range | None = declare(None, kind="range", unit="rad", ge=-2 * PI, le=2 * PI,
-                                        nullable=True,
-                                        doc="each ball's initial angle from the imbalance")
-    ball_drag_scale: Range | None = declare(None, kind="range", gt=0.0, le=1e3, nullable=True,
-                                            doc="factor on the scene's ball_drag")
-    rolling_resistance_scale: Range | None = declare(None, kind="range", ge=0.0, le=1e3,
-                                                     nullable=True,
-                                                     doc="factor on the scene's "
-                                                         "ball_rolling_resistance")
-    critical_speed_scale: Range | None = declare(None, kind="range", gt=0.0, le=10.0,
-                                                 nullable=True,
-                                                 doc="factor s on the critical speeds, through "
-                                                     "the supported mass M / s^2 (a load; "
-                                                     "module docstring)")
-    support_damping_scale: Range | None = declare(None, kind="range", ge=0.0, le=1e3,
-                                                  nullable=True,
-                                                  doc="factor on the scene's support damping "
-                                                      "(both axes)")
+def _randomization_class() -> type:
+    """:class:`Randomization`, one field per episode parameter (declared once in
+    :mod:`abb_gym.envs.episode_parameters`, in draw order)."""
+    cls = make_dataclass(
+        "Randomization",
+        [(name, Any, declare(None, **spec)) for name, spec in randomize_fields()], frozen=True)
+    cls.__module__ = __name__  # pickles as abb_gym.envs.config.Randomization
+    return cls
+
+
+#: The ``randomize`` section: each episode parameter's range (``[lo, hi]``, one number, or
+#: null for the scene's value); its fields come from the declarations of
+#: :mod:`abb_gym.envs.episode_parameters`.
+Randomization = _randomization_class()
 
 
 @dataclass(frozen=True)
@@ -153,8 +148,24 @@ class SyncVibration:
                                "measured vector / A_v (the vibration scale)")
 
 
+@dataclass(frozen=True)
+class Redistribution:
+    enabled: bool = declare(False, kind="flag",
+                            doc="the laundry redistributes when the drum tumbles "
+                                "(abb_gym.envs.redistribution; SpinRedistribute-v0)")
+    tumble_speed: float | None = declare(None, unit="rad/s", gt=0.0, le=1e4, nullable=True,
+                                         doc="drum speed below which the laundry tumbles; "
+                                             "null = 0.8 sqrt(g / R), R the race radius")
+    tumble_time: float = declare(4.0, unit="s", gt=0.0, le=1e3,
+                                 doc="an unbroken stay below the tumble speed this long "
+                                     "redistributes the laundry")
+    max_count: int = declare(4, kind="integer", ge=0, le=MAX_REDISTRIBUTIONS,
+                             doc="redistributions drawn per episode; tumbling after the last "
+                                 "one leaves the laundry where it lies")
+
+
 _SECTIONS = {"reward": RewardWeights, "dwell": DwellRanges, "randomize": Randomization,
-             "sync_vibration": SyncVibration}
+             "sync_vibration": SyncVibration, "redistribution": Redistribution}
 
 
 @dataclass(frozen=True)
@@ -201,6 +212,9 @@ class EnvConfig:
                                        doc="per-episode randomisation")
     sync_vibration: SyncVibration = declare(SyncVibration(), kind="any",
                                             doc="the synchronous vibration observation")
+    redistribution: Redistribution = declare(Redistribution(), kind="any",
+                                             doc="redistribution of the laundry when the drum "
+                                                 "tumbles")
     observe_time: bool = declare(True, kind="flag",
                                  doc="observe the time fraction t / episode_length; false: "
                                      "an observation without it (a policy that cannot act on "

@@ -45,12 +45,13 @@ would make gymnasium's TimeLimit report every episode as truncated).
 from __future__ import annotations
 
 from .base import COMMON_DOC, BalancerEnv
+from .tasks import DWELL_PROFILE
 
 __all__ = ["DwellProfileEnv"]
 
 
 class DwellProfileEnv(BalancerEnv):
-    kind = "dwell"
+    task_id = DWELL_PROFILE.env_id
 
 
 DwellProfileEnv.__doc__ = __doc__ + COMMON_DOC

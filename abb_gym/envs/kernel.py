@@ -33,7 +33,7 @@ from numba.experimental import structref  # noqa: E402  (after .._numba: the cac
 
 from ..physics.specialise import Specialised
 
-from ..physics import batch, model, rotor, runup, sensors
+from ..physics import batch, laundry, model, rotor, runup, sensors
 from ..physics import drive_law as dl
 from . import actions
 from .layout import *  # noqa: F401,F403  (the column names are the kernel's vocabulary)
@@ -71,19 +71,20 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace, balance):
     w = s[i, nq + 2]
     vs = cfg[C_VSCALE]
     vh = cfg[C_VIB_HI]
-    obs[i, 0] = _clip(w / cfg[C_WOP], cfg[C_SPEED_LO], cfg[C_SPEED_HI])
-    obs[i, 1] = _clip(dx / vs, -vh, vh)
-    obs[i, 2] = _clip(dy / vs, -vh, vh)
-    obs[i, 3] = _clip(st[i, S_FILT] / vs, 0.0, vh)
-    c = 4
-    if cfg[C_OBS_TIME] != 0.0:
-        obs[i, 4] = _clip(st[i, S_K] / cfg[C_NMAX], 0.0, 1.0)
-        c = 5
-    na = int(cfg[C_NACT])
-    for a in range(na):
+    # each entry at its offset in the row (abb_gym.envs.observation), -1: left out
+    obs[i, int(cfg[C_OBS + OBS_SPEED])] = _clip(w / cfg[C_WOP], cfg[C_SPEED_LO],
+                                                cfg[C_SPEED_HI])
+    obs[i, int(cfg[C_OBS + OBS_VIB_X])] = _clip(dx / vs, -vh, vh)
+    obs[i, int(cfg[C_OBS + OBS_VIB_Y])] = _clip(dy / vs, -vh, vh)
+    obs[i, int(cfg[C_OBS + OBS_VIB_AMP])] = _clip(st[i, S_FILT] / vs, 0.0, vh)
+    c = int(cfg[C_OBS + OBS_TIME])
+    if c >= 0:
+        obs[i, c] = _clip(st[i, S_K] / cfg[C_NMAX], 0.0, 1.0)
+    c = int(cfg[C_OBS + OBS_ACTION])
+    for a in range(int(cfg[C_NACT])):
         obs[i, c + a] = st[i, S_ACT + a]
-    c += na
-    if cfg[C_SYNC] != 0.0:
+    c = int(cfg[C_OBS + OBS_SYNC])
+    if c >= 0:
         # the synchronous vibration (abb_gym.physics.sensors): the tracking filter's output
         # plus the read-out noise of this control step
         zx = st[i, S_ZX]
@@ -96,8 +97,12 @@ def _observe(i, s, p, b, st, cfg, obs, out, trace, balance):
         obs[i, c] = _clip(amp / vs, 0.0, vh)
         obs[i, c + 1] = zx / amp if amp > 0.0 else 0.0
         obs[i, c + 2] = zy / amp if amp > 0.0 else 0.0
-        c += 3
-    if cfg[C_OBS_BALLS] != 0.0:
+    c = int(cfg[C_OBS + OBS_REDIST])
+    if c >= 0:
+        top = cfg[C_REDIST_MAX]
+        obs[i, c] = st[i, S_NREDIST] / top if top > 0.0 else 0.0
+    c = int(cfg[C_OBS + OBS_BALLS])
+    if c >= 0:
         for k in range(nb):
             ph = s[i, 3 + k]
             obs[i, c + 2 * k] = math.cos(ph)
@@ -142,8 +147,31 @@ def _interval_begin(i, st, cfg, f, g, lane):
         f[batch.W_ZY, lane] = st[i, S_ZY]
 
 
+@njit(cache=True)
+def _tumble(i, s, p, b, st, cfg, g, lane, w):
+    """Redistribution of the laundry (:mod:`abb_gym.envs.redistribution`): after an unbroken
+    stay of the tumble time below the tumble speed the laundry lands anew
+    (:func:`abb_gym.physics.laundry.redistribute`), with the next of the episode's drawn
+    imbalances, while any are left.  The row's state and parameters change, so the lane that
+    holds the row loads it again (``G_HELD``)."""
+    dt = cfg[C_DT]
+    if abs(w) < cfg[C_TUMBLE_SPEED]:
+        st[i, S_TUMBLE] += dt
+    else:
+        st[i, S_TUMBLE] = 0.0
+    done = st[i, S_NREDIST]
+    if st[i, S_TUMBLE] >= cfg[C_TUMBLE_TIME] - 1e-9 * dt and done < cfg[C_REDIST_MAX]:
+        k = S_REDIST + 2 * int(done)
+        laundry.redistribute(s[i], p[i], b[i], st[i, k], st[i, k + 1], st[i, S_MARK])
+        st[i, S_MARK] = st[i, k + 1]
+        st[i, S_UBEST], st[i, S_USCALE] = rotor.best_residual_packed(p[i], b[i])
+        st[i, S_NREDIST] = done + 1.0
+        st[i, S_TUMBLE] = 0.0
+        g[G_HELD, lane] = -1
+
+
 @njit(cache=True, inline="always")
-def _interval_end(i, s, d, st, cfg, out, f, g, lane):
+def _interval_end(i, s, p, b, d, st, cfg, out, f, g, lane):
     """Book row ``i``'s control interval just advanced in lane ``lane`` (its state already
     copied back to ``s[i]`` unless it failed, in which case ``s[i]`` still holds the state at
     the interval start): the run-up metrics (:mod:`abb_gym.physics.runup`: the operating band,
@@ -236,6 +264,8 @@ def _interval_end(i, s, d, st, cfg, out, f, g, lane):
         # would let a run-up that enters the band just before the limit measure its residual
         # over a moment and beat every finished run-up (CMA-ES found exactly that)
         resid = -st[i, S_PEN_TERM]
+    if cfg[C_REDIST] != 0.0 and not (term or trunc):
+        _tumble(i, s, p, b, st, cfg, g, lane, w)
     out[i, O_VIB] += vib
     out[i, O_TIME] += tim
     out[i, O_EFFORT] += eff
@@ -285,14 +315,15 @@ def _begin(i, act, s, d, st, cfg, out, active):
         st[i, S_ACT + a] = v
     out[i, O_ACTFLAG] = flag
     kind = int(cfg[C_KIND])
-    if not actions.whole_episode(kind):
+    if not actions.rows_from_python(kind):
         nq = s.shape[1] // 2
         actions.write_interval_row(kind, d[i, 0], st[i, S_ACT], st[i, S_K] * cfg[C_DT],
                                    s[i, 2], s[i, nq + 2], cfg[C_DT], cfg[C_WOP], cfg[C_AMAX],
                                    cfg[C_TLIM])
         st[i, S_NSEG] = 1.0
         st[i, S_J] = 0.0
-    # (a whole-episode action's rows were written from the action on the Python side)
+    # (otherwise the Python side wrote the rows from the action: a whole-episode action or an
+    # action model of its own)
     return ROW_STEPS
 
 
@@ -395,11 +426,14 @@ def _block_step(q, order, act, s, p, b, d, st, cfg, obs, out, trace, active, bs,
                 batch.rebase_angle(sb, f, l)
             else:
                 g[G_HELD, l] = -1  # the lane holds the failed state, the row the one before
-            done = _interval_end(i, s, d, st, cfg, out, f, g, l)
+            done = _interval_end(i, s, p, b, d, st, cfg, out, f, g, l)
             if done or not whole or g[batch.G_STATUS, l] != 0:
                 g[G_INTEGRATE, l] = 0
                 g[G_DONE, l] = 1 if done else 0
             else:
+                if g[G_HELD, l] != i:  # the laundry redistributed: the row changed
+                    batch.load_lane(s, p, b, i, sb, pb, bbq, f, l)
+                    g[G_HELD, l] = i
                 _record_trace(i, s, p, b, st, cfg, obs, out, trace)
     for l in range(lanes):
         found = g[G_STEPPING, l]

@@ -32,12 +32,13 @@ Default ``episode_length = 2.5 w_op / drive_max_acceleration + settle_time`` (7.
 from __future__ import annotations
 
 from .base import COMMON_DOC, BalancerEnv
+from .tasks import RUN_UP_SPEED
 
 __all__ = ["RunUpSpeedEnv"]
 
 
 class RunUpSpeedEnv(BalancerEnv):
-    kind = "speed"
+    task_id = RUN_UP_SPEED.env_id
 
 
 RunUpSpeedEnv.__doc__ = __doc__ + COMMON_DOC

@@ -30,12 +30,13 @@ Default ``episode_length = 2.5 w_op / drive_max_acceleration + settle_time`` (7.
 from __future__ import annotations
 
 from .base import COMMON_DOC, BalancerEnv
+from .tasks import RUN_UP_TORQUE
 
 __all__ = ["RunUpTorqueEnv"]
 
 
 class RunUpTorqueEnv(BalancerEnv):
-    kind = "torque"
+    task_id = RUN_UP_TORQUE.env_id
 
 
 RunUpTorqueEnv.__doc__ = __doc__ + COMMON_DOC

@@ -86,13 +86,15 @@ from gymnasium.vector.utils import batch_space
 from .actions import checked_action
 from .display import check_display
 from .info import masked, step_info
-from .layout import S_K
+from ..physics.model import P_U0
+from .layout import S_K, S_NREDIST
 from .rendering import Renderer
 from . import episodes
-from .episodes import EpisodeTable
+from .buffers import Buffers
+from .checks import check_flag, check_memory, check_seed, draw_safely
 from .step_rows import StepRows, check_actions, read_step
-from .setup import (Buffers, EnvSetup, SetupAccess, check_flag, check_memory, check_seed,
-                    draw_safely)
+from .setup import EnvSetup, SetupAccess
+from .tasks import DWELL_PROFILE, RUN_UP_SPEED, RUN_UP_TORQUE
 
 __all__ = ["BalancerVectorEnv", "RunUpTorqueVectorEnv", "RunUpSpeedVectorEnv",
            "DwellProfileVectorEnv"]
@@ -105,18 +107,20 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25,
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
-    kind = "speed"
+    #: the registered id this class makes (:mod:`abb_gym.envs.tasks`); ``task=`` overrides it
+    task_id: str | None = None
 
-    def __init__(self, num_envs: int = 1, scene: Any = "yoshida_odd", preset: Any = "train", *,
-                 observe_balls: bool = False, render_mode: str | None = None,
+    def __init__(self, num_envs: int = 1, scene: Any = None, preset: Any = None, *,
+                 task: str | None = None, observe_balls: bool = False,
+                 render_mode: str | None = None,
                  max_episode_steps: int | None = None, record_history: bool = False,
                  kernel: str | None = None, info_level: str = "lean", **overrides: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         info_level = check_display(render_mode, self.metadata["render_modes"], info_level)
-        self.setup = EnvSetup(self.kind, scene, preset, observe_balls, max_episode_steps,
-                              overrides)
+        self.setup = EnvSetup(task or self.task_id, scene, preset, observe_balls,
+                              max_episode_steps, overrides)
         self.info_level = info_level
         self.num_envs = int(num_envs)
         check_flag(record_history, "record_history")
@@ -132,7 +136,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         self._args = self._bufs.kernel_args()
         self._step_fn = None  # the compiled step, fetched at the first step
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
-        self._table = EpisodeTable(self.setup.scene, self.num_envs)
+        self._table = self.setup.new_table(self.num_envs)
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
         self._started = False
         self._warned_clip = False
@@ -188,6 +192,18 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
     def rotor_speeds(self) -> np.ndarray:
         """Rotor speed of each sub-environment [rad/s], shape (num_envs,)."""
         return self._bufs.s[:, self._nq + 2].copy()
+
+    @property
+    def imbalances(self) -> np.ndarray:
+        """Each sub-environment's primary imbalance now [kg m], shape (num_envs,): the
+        episode's, or its laundry's after the redistributions so far (privileged: what an
+        oracle knows, not what a drive observes)."""
+        return self._bufs.p[:, P_U0].copy()
+
+    @property
+    def redistributions(self) -> np.ndarray:
+        """Redistributions of the laundry so far in each sub-environment's episode."""
+        return self._bufs.st[:, S_NREDIST].astype(np.int64)
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -361,18 +377,18 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
 
 
 class RunUpTorqueVectorEnv(BalancerVectorEnv):
-    """Vector version of ``abb_gym/RunUpTorque-v0`` (see :mod:`abb_gym.envs.torque`)."""
+    """Vector version of RunUpTorque (see :mod:`abb_gym.envs.torque`)."""
 
-    kind = "torque"
+    task_id = RUN_UP_TORQUE.env_id
 
 
 class RunUpSpeedVectorEnv(BalancerVectorEnv):
-    """Vector version of ``abb_gym/RunUpSpeed-v0`` (see :mod:`abb_gym.envs.speed`)."""
+    """Vector version of RunUpSpeed (see :mod:`abb_gym.envs.speed`)."""
 
-    kind = "speed"
+    task_id = RUN_UP_SPEED.env_id
 
 
 class DwellProfileVectorEnv(BalancerVectorEnv):
-    """Vector version of ``abb_gym/DwellProfile-v0`` (see :mod:`abb_gym.envs.dwell`)."""
+    """Vector version of DwellProfile (see :mod:`abb_gym.envs.dwell`)."""
 
-    kind = "dwell"
+    task_id = DWELL_PROFILE.env_id

@@ -27,12 +27,11 @@ import numpy as np
 from tqdm import tqdm
 
 from ..physics.rotor import spinning_inertia
+from ..envs import tasks
 from . import metrics as mt
 from .registry import Policy, resolve
 from .statistics import mean_interval, share_ci
 
-DWELL_ID = "abb_gym/DwellProfile-v0"
-SPEED_ID = "abb_gym/RunUpSpeed-v0"
 UNITS = {**mt.METRICS, "return": "-"}
 METRICS = tuple(UNITS)
 SHARES = tuple(k for k, u in UNITS.items() if u == "share")
@@ -186,8 +185,8 @@ def chunks(env_id: str, scene: str, policy: str, episodes: int, seed: int, prese
 
 
 def env_ids() -> list[str]:
-    """The registered abb-gym environment ids (those a chunk can run)."""
-    return sorted(k for k in gym.registry if k.startswith("abb_gym/"))
+    """The registered environment ids (those a chunk can run: the task registry's)."""
+    return tasks.task_ids()
 
 
 def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
@@ -198,10 +197,8 @@ def check_inputs(env_id: str, scene: Any, preset: str = "test", seed: Any = 0,
     nothing), and the policy (``replay:`` specs down to the recorded one).  Raises ValueError
     naming the input, so a bad one is one error, not the same error from every task.
     Returns the policy the spec runs in the end (``replay:SPEC``: SPEC's), or None."""
-    from ..envs.setup import check_seed
-    if not isinstance(env_id, str) or env_id not in gym.registry \
-            or not env_id.startswith("abb_gym/"):
-        raise ValueError(f"unknown environment {env_id!r}; use one of {env_ids()}")
+    from ..envs.checks import check_seed
+    tasks.get(env_id)  # a registered task, or an error naming the ids
     if check_seed(seed, "seed") is None:  # episode k is seed + k: no "fresh entropy" here
         raise ValueError("seed must be an integer >= 0 (got None)")
     make_env(env_id, scene, preset, 1, **env_kwargs).close()
@@ -235,7 +232,7 @@ def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwarg
     acceleration, a closed-loop controller), which runs on RunUpSpeed instead.  The machines
     are the same: every kind draws episode ``k`` from the same preset and seed (tested), and
     DwellProfile pays what RunUpSpeed pays for the same profile, interval by interval."""
-    if env_id != DWELL_ID:
+    if tasks.get(env_id).baselines_on is None:
         return env_id
     return _env_for(_innermost(policy, env_id, scene), env_id, scene, preset, env_kwargs)
 
@@ -243,12 +240,13 @@ def policy_env_id(env_id: str, scene: Any, preset: str, policy: str, **env_kwarg
 def _env_for(inner: Any, env_id: str, scene: Any, preset: str, env_kwargs: dict) -> str:
     """:func:`policy_env_id` of the resolved innermost policy."""
     acts_on = getattr(inner, "acts_on", None)
-    if env_id != DWELL_ID or acts_on is None:
+    fallback = tasks.get(env_id).baselines_on
+    if fallback is None or acts_on is None:
         return env_id
     from ..envs.setup import EnvSetup
-    setup = EnvSetup("dwell", scene, preset, **{k: v for k, v in env_kwargs.items()
-                                                 if k == "observe_balls"})
-    return env_id if acts_on(setup) else SPEED_ID
+    setup = EnvSetup(env_id, scene, preset, **{k: v for k, v in env_kwargs.items()
+                                                if k == "observe_balls"})
+    return env_id if acts_on(setup) else fallback
 
 
 def _run_chunk_task(chunk: Chunk):

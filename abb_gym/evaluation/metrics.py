@@ -132,7 +132,7 @@ def runup_metrics(scene: Scene, t, rotor_speed, x, y, ball_angles,
 
 
 def trajectory_metrics(tr, **kwargs) -> dict[str, Any]:
-    """:func:`runup_metrics` of a :class:`~abb_gym.physics.simulate.Trajectory`."""
+    """:func:`runup_metrics` of a :class:`~abb_gym.physics.trajectory.Trajectory`."""
     return runup_metrics(tr.scene, tr.t, tr.rotor_speed, tr.x, tr.y, tr.ball_angles,
                          torque=tr.motor_torque, **kwargs)
 

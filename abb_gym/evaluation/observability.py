@@ -32,6 +32,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..envs import tasks
+
 __all__ = ["ObservabilityRow", "ball_start_observability", "r2_score", "TARGETS"]
 
 TARGETS = ("ball_vector", "total_imbalance", "control")
@@ -137,7 +139,7 @@ def _fit_predict(x, y, x_test, seed: int, epochs: int):
 
 def ball_start_observability(scene: str = "spannan_cfrp", train_preset: str = "varied",
                              test_preset: str = "varied_test",
-                             env_id: str = "abb_gym/RunUpSpeed-v0",
+                             env_id: str = tasks.DEFAULT_ENV_ID,
                              env_kwargs: dict[str, Any] | None = None,
                              policy: str = "baseline:knots", train_machines: int = 2048,
                              test_machines: int = 256, decisions: Sequence[int] = (4, 12, 24, 40),

@@ -34,15 +34,10 @@ def _nominal_env(env: Any, info_level: str | None = None):
     setup = env.unwrapped.setup
     config = load_preset(setup.config, randomize={k: None for k in
                                                   setup.config.randomize.__dataclass_fields__})
-    return gym.make_vec(env.spec.id if env.spec else _env_id(setup), num_envs=1,
+    return gym.make_vec(env.spec.id if env.spec else setup.task.env_id, num_envs=1,
                         vectorization_mode="vector_entry_point", scene=setup.scene,
                         preset=config, observe_balls=setup.observe_balls,
                         info_level=info_level or getattr(env.unwrapped, "info_level", "full"))
-
-
-def _env_id(setup) -> str:
-    return {"speed": "abb_gym/RunUpSpeed-v0", "torque": "abb_gym/RunUpTorque-v0",
-            "dwell": "abb_gym/DwellProfile-v0"}[setup.kind]
 
 
 def record_actions(policy: Any, env: Any) -> np.ndarray:
@@ -74,7 +69,7 @@ class ReplayPolicy:
 
     def reset(self, env: Any, mask: np.ndarray) -> None:
         if self.actions is None:
-            inner = resolve(self.spec, self.env_id or _env_id(env.unwrapped.setup), self.scene)
+            inner = resolve(self.spec, self.env_id or env.unwrapped.setup.task.env_id, self.scene)
             # the recorded policy gets the full info unless it reads none (the replay itself
             # reads none, so the evaluation may have made env's info lean)
             reads = getattr(inner, "reads_info", True) is not False

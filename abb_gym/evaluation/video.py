@@ -129,9 +129,7 @@ def render_episode(env_id: str, scene: str, policy: str, out: str | os.PathLike,
     check_inputs(env_id, scene, preset, seed, policy, **env_kwargs)
     n_steps = episode_steps(env_id, scene=scene, preset=preset, **env_kwargs)
     if every is None:
-        kind = env_id.split("/")[-1].split("-")[0]
-        interval = EnvSetup({"RunUpTorque": "torque", "RunUpSpeed": "speed",
-                             "DwellProfile": "dwell"}[kind], scene, preset).control_interval
+        interval = EnvSetup(env_id, scene, preset).control_interval
         every = default_every(fps, interval)
     every = int(every)
     expected = frame_count(n_steps, every)

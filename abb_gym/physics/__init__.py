@@ -12,14 +12,15 @@ from .._lazy import lazy_names
 if TYPE_CHECKING:
     from .drives import MotorDrive, SpeedProfile
     from .scene import Scene, SceneError, list_scenes, load_scene
-    from .simulate import SimulationError, Trajectory, simulate
+    from .simulate import SimulationError, simulate
+    from .trajectory import Trajectory
 
 __all__ = ["MotorDrive", "SpeedProfile", "Scene", "SceneError", "list_scenes", "load_scene",
            "SimulationError", "Trajectory", "simulate"]
 
 _HOME = {"MotorDrive": "drives", "SpeedProfile": "drives", "Scene": "scene",
          "SceneError": "scene", "list_scenes": "scene", "load_scene": "scene",
-         "SimulationError": "simulate", "Trajectory": "simulate", "simulate": "simulate"}
+         "SimulationError": "simulate", "Trajectory": "trajectory", "simulate": "simulate"}
 
 
 __getattr__, __dir__ = lazy_names(__name__, _HOME)

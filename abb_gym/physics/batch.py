@@ -85,7 +85,8 @@ from . import integrators as integ
 from . import model as mdl
 from . import sensors
 from .methods import PRECISIONS
-from .simulate import default_step, initial_state
+from .simulate import initial_state
+from .steps import default_step
 from .specialise import Specialised, resolve_kernel
 
 __all__ = ["advance_block", "run_batch", "run_inputs", "Blocks", "lanes_per_block",

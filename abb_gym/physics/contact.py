@@ -109,7 +109,7 @@ def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
 
     Gershgorin over the touching neighbours, omega^2 = sum_j k (1/m_i + 1/m_j), counting the
     two largest terms only: in a ring a ball has one neighbour on each side, and the state at
-    which the step rule asks (all balls at ph = 0, :func:`abb_gym.physics.simulate.stiff_rate`)
+    which the step rule asks (all balls at ph = 0, :func:`abb_gym.physics.steps.stiff_rate`)
     would otherwise count every ball.  Overdamped contacts (zeta > 1/2) have a fast real root
     up to 2 zeta omega."""
     first = 0.0

@@ -68,7 +68,7 @@ from scipy.optimize import root
 from ..configuration import (ConfigError, build, check, declare, fields_table, locate,
                              read_yaml, specs)
 from .drives import SpeedProfile
-from .simulate import PlanarStates
+from .trajectory import PlanarStates
 
 __all__ = ["SpringRodBalancer", "SpringRodTrajectory", "load_spring_rod", "simulate_spring_rod",
            "spring_rod_rhs", "spring_rod_equilibrium", "spring_rod_jacobian",

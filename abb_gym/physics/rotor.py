@@ -110,6 +110,28 @@ def best_residual(scene: Scene, imbalance=None):
     return float(out) if out.ndim == 0 else out
 
 
+@njit(cache=True)
+def best_residual_packed(p, b):
+    """:func:`best_residual` [kg m] and :func:`imbalance_scale` [kg m] of one machine from its
+    packed parameters (:func:`abb_gym.physics.model.pack_parameters`): what a compiled step
+    needs after the imbalance changed (:mod:`abb_gym.physics.laundry`)."""
+    big_r = p[mdl.P_R]
+    cap = 0.0
+    largest = 0.0
+    balls = 0.0
+    for k in range(b.shape[0]):
+        mr = b[k, mdl.B_MASS] * big_r
+        cap += mr
+        largest = max(largest, mr)
+        balls += b[k, mdl.B_MASS]
+    lo = max(0.0, 2.0 * largest - cap)
+    me = balls * p[mdl.P_E]
+    u0 = p[mdl.P_U0]
+    fixed = math.hypot(u0 + me * math.cos(p[mdl.P_GAM]), me * math.sin(p[mdl.P_GAM]))
+    best = lo - fixed if fixed < lo else (fixed - cap if fixed > cap else 0.0)
+    return best, max(u0, IMBALANCE_FLOOR * cap)
+
+
 @njit(cache=True, inline="always")
 def is_balanced(residual, best, tolerance, scale):
     """True if ``residual`` [kg m] is within ``tolerance * scale`` of ``best`` [kg m]."""

@@ -7,6 +7,7 @@ Needs the training extra (``pip install -c constraints.txt 'abb-gym[train]'``).
                                      environment (same-step resets through ``reset_mask``,
                                      ``terminal_observation``, ``TimeLimit.truncated``)
 :func:`load_config`, TrainConfig     zoo-style YAML configs in ``configs/ppo/``
+:func:`zoo_problems`                 what keeps rl_zoo3 from training a config file unchanged
 :func:`make_sb3_env`                 the adapter over ``gym.make_vec(..., "vector_entry_point")``
 :func:`train`                        one PPO run -> run folder (``abb-gym train``)
 :func:`load_policy`, PPOPolicy       a run folder or shipped agent as an evaluation ``Policy``
@@ -32,15 +33,17 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
     raise ImportError(f"abb_gym.rl needs the training extra: pip install -c constraints.txt "
                       f"'abb-gym[train]' ({exc})") from exc
 
-from .config import (POLICY_FIELDS, TrainConfig, eval_env_kwargs, load_config,
-                     make_native_env, make_sb3_env)
+from .config import TrainConfig, load_config
+from .env_factory import POLICY_FIELDS, eval_env_kwargs, make_native_env, make_sb3_env
 from .agent import PPOPolicy, load_policy, load_ppo, trained_dir
 from ..evaluation.evaluate import summarise
 from .rollout import run_episodes
 from .train import RunResult, train
 from .vec_env import NativeVecEnv, split_info
+from .zoo import zoo_problems
 
 __all__ = ["NativeVecEnv", "split_info", "TrainConfig", "load_config", "make_sb3_env",
            "make_native_env", "eval_env_kwargs", "POLICY_FIELDS", "train", "RunResult",
-           "PPOPolicy", "load_policy", "load_ppo", "trained_dir", "run_episodes", "summarise"]
+           "PPOPolicy", "load_policy", "load_ppo", "trained_dir", "run_episodes", "summarise",
+           "zoo_problems"]
 

@@ -26,7 +26,7 @@ and a sub-environment's memory advances only when it decides (once per held acti
 Environment checks (``reset``): the observation and action shapes must equal the agent's
 (``observe_balls`` in particular), the observation layout the one recorded in ``agent.yml``,
 and the policy-relevant preset fields
-(:data:`abb_gym.rl.config.POLICY_FIELDS`) must match.  An agent trained with a control interval
+(:data:`abb_gym.rl.env_factory.POLICY_FIELDS`) must match.  An agent trained with a control interval
 ``k`` times the environment's (``k`` an integer) holds each action for ``k`` steps (a zero-order
 hold, as the training environment did), deciding on the observation at the start of each
 hold; a mismatch raises ``ValueError`` naming the field.  ``policy.env_kwargs`` lists the
@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import observation_kwargs, policy_env_mismatch
+from .env_factory import observation_kwargs, policy_env_mismatch
 
 __all__ = ["PPOPolicy", "load_policy", "trained_dir", "resolve_agent_path"]
 

@@ -103,7 +103,8 @@ class AgentFiles:
 def entry_algorithm(entry: Mapping[str, Any], data: Mapping[str, Any] | None = None) -> str:
     """The algorithm of a config entry: ``_abb_gym.algo`` of the whole file ``data`` if set,
     else the one its ``policy`` implies (``ppo``, ``ppo_lstm``)."""
-    from .config import algorithm_of, section_algorithm
+    from .algorithms import algorithm_of
+    from .config import section_algorithm
     return algorithm_of(str(entry.get("policy", "MlpPolicy")), section_algorithm(data or {}))
 
 
@@ -312,7 +313,7 @@ def load_model(path: Path, obs_size: int, action_size: int | None = None,
     """The SB3 model in ``path`` (on the CPU), trained by ``algo`` (``ppo``, or ``ppo_lstm``:
     RecurrentPPO); one :class:`AgentError` if it cannot be read or its spaces are not
     ``obs_size`` observations and ``action_size`` actions (None: any)."""
-    from .config import ALGORITHMS, algorithm_class
+    from .algorithms import ALGORITHMS, algorithm_class
 
     algorithm = algorithm_class(algo)
     label = _label(path)
@@ -344,7 +345,7 @@ def custom_objects_for(entry: Mapping[str, Any]) -> dict | None:
 
 # ------------------------------------------------------------------------ writing
 def _observation_names(env_id: str, policy_env: Mapping[str, Any]) -> list[str]:
-    from .config import make_native_env, observation_kwargs
+    from .env_factory import make_native_env, observation_kwargs
     env = make_native_env(env_id, 1, {"scene": policy_env["scene"], "preset": "test",
                                       **observation_kwargs(policy_env)})
     try:

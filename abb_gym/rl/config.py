@@ -1,4 +1,4 @@
-"""PPO training configurations (rl-baselines3-zoo format) and the environments they build.
+"""PPO training configurations (rl-baselines3-zoo format): the file format and its parsing.
 
 A file in ``configs/ppo/`` is an rl-baselines3-zoo hyperparameter file: rl_zoo3 trains it
 unchanged, and ``abb-gym train`` reads the same file::
@@ -69,7 +69,7 @@ Why this layout (what rl_zoo3 does with a file: ``rl_zoo3/exp_manager.py``,
   prevents (see :mod:`abb_gym.rl.networks`).
 * A policy with memory (``MlpLstmPolicy``, or ``abb_gym.rl.networks.BoundedMlpLstmPolicy``
   with the bounded mean) is trained by sb3-contrib's ``RecurrentPPO``, as rl_zoo3 does with
-  ``--algo ppo_lstm``: the algorithm follows from the policy (:func:`algorithm_of`), so the
+  ``--algo ppo_lstm``: the algorithm follows from the policy (:func:`~abb_gym.rl.algorithms.algorithm_of`), so the
   file needs no key of its own, and the keys under the id are RecurrentPPO's keywords.
 * SAC and sb3-contrib's TQC (off-policy, their own squashed-Gaussian ``MlpPolicy``) are
   chosen by ``algo: sac`` or ``algo: tqc`` in ``_abb_gym`` (rl_zoo3 takes ``--algo`` on its
@@ -78,9 +78,7 @@ Why this layout (what rl_zoo3 does with a file: ``rl_zoo3/exp_manager.py``,
   string with ``torch.nn`` in scope but passes a mapping on unchanged, where
   ``activation_fn: Tanh`` would reach torch as a string.
 
-:func:`zoo_problems` checks a file against these rules without rl_zoo3 (the shipped configs
-are checked by the tests; ``tests/test_rl_zoo.py`` also trains each one with rl_zoo3 when it
-is installed).
+:func:`abb_gym.rl.zoo.zoo_problems` checks a file against these rules without rl_zoo3.
 
 The first-wave format, still read (the shipped agents' ``agents/trained/*/config.yml`` use it
 and are fingerprinted): the ``_abb_gym`` keys under the id, ``policy: BoundedMlpPolicy`` and
@@ -89,19 +87,14 @@ and are fingerprinted): the ``_abb_gym`` keys under the id, ``policy: BoundedMlp
 (tested for every shipped agent) and writes the run's ``config.yml`` in the current format.
 ``tensorboard_log`` is accepted only in ``_abb_gym``.
 
-The evaluation environment is ``{scene, preset: "test"}`` plus the *policy-relevant* fields of
-``env_kwargs`` (:data:`POLICY_FIELDS`: what changes the observation or the meaning of an
-action), then ``eval_env_kwargs``; reward weights and randomisation ranges of the training
-environment are not carried over, so shaping the reward never changes the test.  (rl_zoo3's
-own evaluation uses the training ``env_kwargs`` unless ``--eval-env-kwargs`` is given.)
+The evaluation environment built from a config, and the environment a trained agent needs:
+:mod:`abb_gym.rl.env_factory`.
 """
 from __future__ import annotations
 
 import copy
-import inspect
-import math
 import os
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -110,23 +103,13 @@ import gymnasium as gym
 from .. import resources
 from ..configuration import (ConfigError, build_section, check, declare, fields_table,
                              locate, parse_python_literal, read_yaml, specs)
+from .algorithms import (ALGORITHMS, OFF_POLICY, POLICY_NAMES, STARTED_POLICIES,
+                         algorithm_keywords, algorithm_of)
 
 __all__ = ["TrainConfig", "WarmStartSettings", "warm_start_settings", "load_config",
-           "config_path", "configs_dir", "POLICY_FIELDS",
-           "OBSERVATION_FIELDS", "observation_kwargs",
-           "make_native_env", "make_sb3_env", "eval_env_kwargs", "policy_env_fields",
-           "policy_env_mismatch",
-           "linear_schedule", "resolve_policy_kwargs", "ABB_GYM_SECTION", "ABB_GYM_KEYS",
-           "zoo_problems", "TrainConfigError", "ALGORITHMS", "algorithm_of", "algorithm_class",
-           "import_class", "section_algorithm"]
+           "config_path", "configs_dir", "linear_schedule", "resolve_policy_kwargs",
+           "ABB_GYM_SECTION", "ABB_GYM_KEYS", "TrainConfigError", "section_algorithm"]
 
-#: preset fields that shape the observation (the environment must use the agent's values)
-OBSERVATION_FIELDS = ("sync_vibration", "frame_stack", "observe_time")
-#: preset fields that change the observation or the meaning of an action; a policy needs the
-#: same values in evaluation (``control_interval``: the same or an integer fraction of it)
-POLICY_FIELDS = ("control_interval", "episode_length", "operating_speed",
-                 "vibration_filter_time", "dwell") + OBSERVATION_FIELDS
-ENV_KEYWORDS = ("scene", "preset", "observe_balls")
 #: gym.make_vec keywords the trainer sets itself
 RESERVED_ENV_KWARGS = frozenset({"id", "num_envs", "vectorization_mode", "vector_kwargs",
                                  "wrappers"})
@@ -139,46 +122,6 @@ ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
 SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo", "init_from")
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
-#: keys rl_zoo3 consumes itself under the id (``ExperimentManager._preprocess_hyperparams``);
-#: every other key goes to ``PPO(...)``
-ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "env_kwargs", "policy", "policy_kwargs",
-            "frame_stack", "monitor_kwargs", "env_wrapper", "vec_env_wrapper", "callback")
-#: PPO keywords rl_zoo3 sets from its command line: under the id PPO would get them twice
-ZOO_OWN_KEYWORDS = ("env", "tensorboard_log", "seed", "verbose", "device")
-#: SB3's and sb3-contrib's names for their own policies (``PPO.policy_aliases``,
-#: ``RecurrentPPO.policy_aliases``)
-SB3_POLICY_ALIASES = ("MlpPolicy", "CnnPolicy", "MultiInputPolicy", "MlpLstmPolicy",
-                      "CnnLstmPolicy", "MultiInputLstmPolicy")
-POLICY_NAMES = {"MlpPolicy": "MlpPolicy",
-                "BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
-                "abb_gym.rl.networks.BoundedMlpPolicy": "abb_gym.rl.networks.BoundedMlpPolicy",
-                "MlpLstmPolicy": "MlpLstmPolicy",
-                "abb_gym.rl.networks.BoundedMlpLstmPolicy":
-                    "abb_gym.rl.networks.BoundedMlpLstmPolicy",
-                "abb_gym.rl.networks.StartedSACPolicy": "abb_gym.rl.networks.StartedSACPolicy",
-                "abb_gym.rl.networks.StartedTQCPolicy": "abb_gym.rl.networks.StartedTQCPolicy"}
-#: the algorithms, by rl_zoo3's ``--algo`` name: (module, class)
-ALGORITHMS = {"ppo": ("stable_baselines3", "PPO"), "ppo_lstm": ("sb3_contrib", "RecurrentPPO"),
-              "sac": ("stable_baselines3", "SAC"), "tqc": ("sb3_contrib", "TQC")}
-#: off-policy algorithms: their own squashed-Gaussian ``MlpPolicy``, chosen by ``_abb_gym.algo``
-OFF_POLICY = ("sac", "tqc")
-#: policies with memory (an LSTM), trained by RecurrentPPO; every other one by PPO
-RECURRENT_POLICIES = ("MlpLstmPolicy", "abb_gym.rl.networks.BoundedMlpLstmPolicy")
-#: the off-policy algorithms' policies with an initial action mean, and their algorithm
-STARTED_POLICIES = {"abb_gym.rl.networks.StartedSACPolicy": "sac",
-                    "abb_gym.rl.networks.StartedTQCPolicy": "tqc"}
-
-
-def algorithm_of(policy: str, algo: str | None = None) -> str:
-    """rl_zoo3's ``--algo`` name of the algorithm that trains ``policy``: ``algo`` if given
-    (the ``_abb_gym.algo`` key: ``sac`` or ``tqc``), else ``ppo_lstm`` (sb3-contrib's
-    RecurrentPPO) for a recurrent policy and ``ppo`` for any other."""
-    if algo is not None:
-        return algo
-    name = POLICY_NAMES.get(policy, policy)
-    if name in STARTED_POLICIES:
-        return STARTED_POLICIES[name]
-    return "ppo_lstm" if name in RECURRENT_POLICIES else "ppo"
 
 
 def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
@@ -202,25 +145,6 @@ def _check_algorithm(where: str, policy: Any, algo: Any) -> str:
     return implied
 
 
-def import_class(module: str, name: str, what: str) -> type:
-    """Class ``name`` of ``module`` (part of the training extra); an ``ImportError`` saying
-    what needs which package and how to install it, if it is missing."""
-    import importlib
-    try:
-        return getattr(importlib.import_module(module), name)
-    except ImportError as exc:
-        package = module.split(".")[0].replace("_", "-")
-        raise ImportError(f"{what} needs {package}: pip install -c constraints.txt "
-                          f"'abb-gym[train]' ({exc})") from exc
-
-
-def algorithm_class(algo: str) -> type:
-    """The SB3 (or sb3-contrib) class of ``algo`` (a key of :data:`ALGORITHMS`); an
-    ``ImportError`` naming the package if it is missing."""
-    module, name = ALGORITHMS[algo]
-    return import_class(module, name, f"{name} ({algo})")
-
-
 def section_algorithm(data: Mapping[str, Any]) -> str | None:
     """``_abb_gym.algo`` of a whole config file's content, if it names an algorithm (None:
     the policy decides, :func:`algorithm_of`)."""
@@ -241,12 +165,6 @@ def configs_dir() -> Path:
 def config_path(name_or_path: str | os.PathLike) -> Path:
     """A config file from a path or a name on the search path (``ppo/<name>.yml``)."""
     return locate("ppo", name_or_path, "PPO config", TrainConfigError)
-
-
-def _algorithm_keywords(algo: str = "ppo") -> set[str]:
-    params = set(inspect.signature(algorithm_class(algo).__init__).parameters)
-    return params - {"self", "policy", "env", "policy_kwargs", "seed", "device",
-                     "_init_setup_model", "verbose"}
 
 
 def linear_schedule(start: float):
@@ -453,7 +371,7 @@ class TrainConfig:
         table = specs(cls)
         own = set(table) - {"env_id", "hyperparams", "source"}
         algo = _check_algorithm(where, raw.get("policy", "MlpPolicy"), raw.pop("algo", None))
-        algo_keys = _algorithm_keywords(algo)
+        algo_keys = algorithm_keywords(algo)
         unknown = sorted(set(raw) - own - algo_keys, key=str)
         if unknown:
             raise TrainConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
@@ -583,190 +501,3 @@ def load_config(name_or_path: str | os.PathLike, env_id: str | None = None) -> T
         raise TrainConfigError(f"PPO config {str(path)!r} has no entry for {env_id!r}; it has "
                                f"{sorted(data)}")
     return TrainConfig.from_mapping(env_id, data[env_id], str(path), extra)
-
-
-def zoo_problems(config: str | os.PathLike | Mapping[str, Any],
-                 env_id: str | None = None) -> list[str]:
-    """What keeps rl_zoo3 (``python -m rl_zoo3.train --algo ppo -conf FILE``, ``--algo
-    ppo_lstm`` for a recurrent policy) from training a
-    config file unchanged: one line per problem, naming the id and the key; empty if none.
-
-    ``config`` is a file (path or name on the search path) or its parsed content; ``env_id``
-    None checks every environment id in it.  The rules are those of rl_zoo3's
-    ``ExperimentManager`` (see the module docstring); the file must also be a valid
-    ``abb-gym train`` config (:func:`load_config`), which this does not check."""
-    if isinstance(config, Mapping):
-        data = config
-    else:
-        data = read_yaml(config_path(config), "PPO config", TrainConfigError)
-    ids = [k for k in data if not str(k).startswith("_")]
-    if env_id is not None:
-        if env_id not in data:
-            return [f"{env_id}: no entry for this environment id (rl_zoo3 reads only the "
-                    f"entry of --env)"]
-        ids = [env_id]
-    if not ids:
-        return ["the file has no environment id entry (rl_zoo3 reads only the entry of "
-                "--env)"]
-    algo = section_algorithm(data)
-    out: list[str] = []
-    for key in ids:
-        out += [f"{key}: {p}" for p in _zoo_entry_problems(data[key], algo)]
-    return out
-
-
-def _zoo_entry_problems(entry: Any, algo: str | None = None) -> list[str]:
-    if not isinstance(entry, Mapping):
-        return [f"the entry must be a mapping of hyperparameters (got {entry!r})"]
-    problems = []
-    for key in ("n_timesteps", "policy"):
-        if key not in entry:
-            problems.append(f"{key!r} is missing (rl_zoo3 needs it; abb-gym train has a "
-                            f"default)")
-    policy = entry.get("policy", "MlpPolicy")
-    if not isinstance(policy, str):
-        problems.append(f"'policy' must be a policy name or an import path (got {policy!r})")
-    elif "." in policy:
-        import importlib
-        module, _, name = policy.rpartition(".")
-        try:
-            found = getattr(importlib.import_module(module), name, None)
-        except ImportError as exc:
-            found, why = None, f" ({exc})"
-        else:
-            why = ""
-        if not isinstance(found, type):
-            problems.append(f"'policy': rl_zoo3 cannot import the class {policy!r}{why}")
-    elif policy not in SB3_POLICY_ALIASES:
-        hint = (f"; rl_zoo3 imports a custom policy by its import path: "
-                f"{POLICY_NAMES[policy]}" if policy in POLICY_NAMES else "")
-        problems.append(f"'policy': {policy!r} is not an SB3 policy name "
-                        f"{list(SB3_POLICY_ALIASES)}{hint}")
-    kwargs = entry.get("policy_kwargs")
-    if isinstance(kwargs, str):
-        try:
-            parse_python_literal(kwargs, {"nn": _torch_nn()}, "policy_kwargs", TrainConfigError)
-        except TrainConfigError as exc:
-            problems.append(str(exc))
-    elif isinstance(kwargs, Mapping):
-        for k, v in kwargs.items():
-            if isinstance(v, str) and str(k).endswith(("_fn", "_class")):
-                problems.append(f"'policy_kwargs.{k}' is the string {v!r} in a mapping, which "
-                                f"rl_zoo3 passes to the policy as it is; write policy_kwargs "
-                                f"as the zoo's string, e.g. \"dict(..., {k}=nn.{v})\"")
-    elif kwargs is not None:
-        problems.append(f"'policy_kwargs' must be a zoo string \"dict(...)\" or a mapping "
-                        f"(got {kwargs!r})")
-    norm = entry.get("normalize", False)
-    if isinstance(norm, str):
-        try:
-            parse_python_literal(norm, {}, "normalize", TrainConfigError)
-        except TrainConfigError as exc:
-            problems.append(str(exc))
-    elif not isinstance(norm, (bool, Mapping)):
-        problems.append(f"'normalize' must be true, false, a mapping or a zoo string (got "
-                        f"{norm!r})")
-    for key in SCHEDULE_KEYS:
-        v = entry.get(key)
-        if isinstance(v, str) and not (v.startswith("lin_") and v.count("_") == 1):
-            problems.append(f"{key!r}: rl_zoo3 reads a string only as lin_<start> (got {v!r})")
-    env_kwargs = entry.get("env_kwargs")
-    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
-        problems.append(f"'env_kwargs' must be a mapping (got {env_kwargs!r})")
-    algo = algorithm_of(policy, algo) if isinstance(policy, str) else "ppo"
-    algo_keys = _algorithm_keywords(algo)
-    for key in entry:
-        if key in ABB_GYM_KEYS:
-            why = ("rl_zoo3 passes its own tensorboard_log to PPO" if key == "tensorboard_log"
-                   else "rl_zoo3 passes it to PPO, which does not know it")
-            problems.append(f"{key!r} under the environment id: {why}; move it to the "
-                            f"{ABB_GYM_SECTION} section")
-        elif key in ZOO_OWN_KEYWORDS:
-            problems.append(f"{key!r} under the environment id: rl_zoo3 sets it from its "
-                            f"command line")
-        elif key not in ZOO_KEYS and key not in algo_keys:
-            problems.append(f"{key!r} is neither an rl_zoo3 key nor a {ALGORITHMS[algo][1]} "
-                            f"keyword")
-    return problems
-
-
-def eval_env_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    """Keywords of the held-out evaluation environment (see the module docstring)."""
-    env = cfg.env_kwargs
-    out: dict[str, Any] = {"scene": env.get("scene", "yoshida_odd"), "preset": "test"}
-    if "observe_balls" in env:
-        out["observe_balls"] = env["observe_balls"]
-    for key in POLICY_FIELDS:
-        if key in env:
-            out[key] = copy.deepcopy(env[key])
-    out.update(copy.deepcopy(cfg.eval_env_kwargs))
-    return out
-
-
-def observation_kwargs(policy_env: Mapping[str, Any]) -> dict[str, Any]:
-    """The environment keywords that give an agent its observation (``observe_balls`` if set,
-    and the :data:`OBSERVATION_FIELDS` it was trained with), from its stored ``policy_env``;
-    agents saved before a field existed lack it and use the preset's value."""
-    out: dict[str, Any] = {"observe_balls": True} if policy_env.get("observe_balls") else {}
-    out.update({k: copy.deepcopy(policy_env[k]) for k in OBSERVATION_FIELDS if k in policy_env})
-    # a frame stack holds the last k observations of the environment's own steps: its frames
-    # are one control interval apart, so the agent's interval is part of its observation (on
-    # a finer environment, holding each action, it would see k frames of a shorter past)
-    if int(policy_env.get("frame_stack") or 1) > 1 and "control_interval" in policy_env:
-        out["control_interval"] = policy_env["control_interval"]
-    return out
-
-
-def policy_env_fields(native_env: Any) -> dict[str, Any]:
-    """The resolved policy-relevant settings of an environment (stored with a trained agent)."""
-    setup = native_env.unwrapped.setup
-    conf = setup.config.to_dict()
-    out = {k: conf[k] for k in POLICY_FIELDS}
-    out["control_interval"] = float(setup.control_interval)
-    out["episode_length"] = float(setup.episode_length)
-    out["operating_speed"] = float(setup.operating_speed)
-    out["observe_balls"] = bool(setup.observe_balls)
-    out["scene"] = setup.scene.name
-    out["kind"] = setup.kind
-    return out
-
-
-def policy_env_mismatch(want: Mapping[str, Any], setup: Any) -> str | None:
-    """What differs between an agent's recorded policy-relevant settings ``want`` (its
-    ``_run.policy_env``) and an environment's resolved ``setup``, as a sentence naming the
-    field, or None.  The control interval is the caller's rule (an evaluation may hold each
-    action for an integer number of steps, a warm start may not), so it is not compared here.
-    Fields missing from ``want`` (agents of older versions) are not compared."""
-    kind = want.get("kind")
-    if kind is not None and kind != setup.kind:
-        return (f"the action kind of the environment ({setup.kind!r}) differs from the "
-                f"agent's ({kind!r})")
-    conf = setup.config.to_dict()
-    for key in ("vibration_filter_time", "dwell") + OBSERVATION_FIELDS:
-        if key in want and conf[key] != want[key]:
-            return (f"preset field {key!r} of the environment ({conf[key]!r}) differs from "
-                    f"the agent's ({want[key]!r})")
-    for key, have in (("operating_speed", setup.operating_speed),
-                      ("episode_length", setup.episode_length)):
-        value = want.get(key)
-        if value is not None and not math.isclose(have, value, rel_tol=1e-9):
-            return (f"preset field {key!r} of the environment ({have:g}) differs from the "
-                    f"agent's ({value:g})")
-    return None
-
-
-def make_native_env(env_id: str, n_envs: int, env_kwargs: Mapping[str, Any] | None = None):
-    """``gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", ...)``."""
-    import abb_gym  # noqa: F401
-    kwargs = dict(env_kwargs or {})
-    return gym.make_vec(env_id, num_envs=int(n_envs), vectorization_mode="vector_entry_point",
-                        **kwargs)
-
-
-def make_sb3_env(env_id: str, n_envs: int, env_kwargs: Mapping[str, Any] | None = None, *,
-                 bootstrap_truncated: bool = True, info_keys=None):
-    """The native vector environment behind the SB3 adapter
-    (:class:`abb_gym.rl.vec_env.NativeVecEnv`)."""
-    from .vec_env import NativeVecEnv
-    return NativeVecEnv(make_native_env(env_id, n_envs, env_kwargs),
-                        bootstrap_truncated=bootstrap_truncated, info_keys=info_keys)

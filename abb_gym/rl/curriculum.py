@@ -25,13 +25,14 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from ..configuration import build_section, declare
+from ..envs.episode_parameters import PARAMETERS
 
 __all__ = ["CURRICULUM_FIELDS", "CurriculumSettings", "curriculum_settings", "fraction",
            "narrowed", "CurriculumCallback"]
 
-#: the ``randomize`` fields a curriculum may narrow (factors whose nominal value is 1)
-CURRICULUM_FIELDS = ("critical_speed_scale", "ball_drag_scale", "rolling_resistance_scale",
-                     "support_damping_scale")
+#: the ``randomize`` fields a curriculum may narrow: the episode parameters that are factors
+#: on a scene value, nominal 1 (:mod:`abb_gym.envs.episode_parameters`)
+CURRICULUM_FIELDS = tuple(par.randomize for par in PARAMETERS if par.factor)
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 import torch
 from torch import nn
 
-from .config import import_class
+from .algorithms import import_class
 
 __all__ = ["BoundedMlpPolicy", "BoundedMlpLstmPolicy", "StartedSACPolicy", "StartedTQCPolicy",
            "POLICIES", "policy_class"]

@@ -12,7 +12,7 @@ What one run does:
    narrows the machines' ranges early in training (if ``curriculum``:
    :mod:`abb_gym.rl.curriculum`);
 2. trains ``PPO`` (``RecurrentPPO`` for a recurrent policy, SAC or TQC if the config's
-   ``algo`` says so: :func:`~abb_gym.rl.config.algorithm_of`) for ``n_timesteps``
+   ``algo`` says so: :func:`~abb_gym.rl.algorithms.algorithm_of`) for ``n_timesteps``
    environment steps with the seed (Python, NumPy, torch,
    the environments' generators and the action space), a progress bar, a test-set evaluation
    every ``eval_freq`` steps and checkpoints every ``checkpoint_freq`` steps;
@@ -65,8 +65,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .config import (TrainConfig, algorithm_class, eval_env_kwargs,
-                     make_sb3_env, policy_env_fields)
+from .algorithms import algorithm_class
+from .config import TrainConfig
+from .env_factory import eval_env_kwargs, make_sb3_env, policy_env_fields
 from .agent import PPOPolicy
 from ..evaluation.evaluate import summarise
 from .rollout import KEY_METRICS, brief, run_episodes

@@ -20,7 +20,7 @@ The settings are read with the rest of the config (:class:`abb_gym.rl.config.War
 The folder is checked before any training (:func:`abb_gym.rl.agent_files.check_folder`: the
 fingerprints of its files), and must be an agent of the same environment id, algorithm and
 observation layout, trained at the same policy-relevant preset fields
-(:data:`abb_gym.rl.config.POLICY_FIELDS`: the same ones an evaluation checks, and the same
+(:data:`abb_gym.rl.env_factory.POLICY_FIELDS`: the same ones an evaluation checks, and the same
 control interval), with normalisation statistics exactly when the new config normalises.
 The run's ``config.yml`` records the folder, the model and its sha256 under
 ``_run.init_from``.
@@ -41,7 +41,7 @@ def warm_start_files(settings: Mapping[str, Any], env_id: str, algo: str, setup:
     the resolved setup of the new run's environment (``env.unwrapped.setup``); ``run_dir``:
     the new run's folder, which must be another one (it would overwrite the files)."""
     from .agent_files import AgentError, check_folder
-    from .config import policy_env_mismatch
+    from .env_factory import policy_env_mismatch
 
     folder = Path(settings["folder"])
     if not folder.is_dir():

@@ -22,9 +22,6 @@ import re
 # |x| with no space inside its bars, not ``|x|`` in a literal, not a table rule
 _ABS = re.compile(r"(?<![\\|`\w])\|(?=[^\s|])([^|\n]*?[^\s|\\])\|(?![|\w`])")
 _LITERAL = re.compile(r"(``.+?``)")
-_ENV_PAGES = {"abb_gym.envs.speed": "abb_gym/RunUpSpeed-v0",
-              "abb_gym.envs.torque": "abb_gym/RunUpTorque-v0",
-              "abb_gym.envs.dwell": "abb_gym/DwellProfile-v0"}
 
 
 def escape_bars(line: str) -> str:
@@ -100,20 +97,21 @@ def inherited_from_elsewhere(name: str, obj) -> str | None:
     return None
 
 
-def env_page(env_id: str) -> str:
-    from abb_gym_pages import env_docname
-    return env_docname(env_id)
+def env_pages() -> dict[str, str]:
+    """Environment module -> the docs page of its id (from the task registry)."""
+    from abb_gym_pages import env_docname, tasks
+    return {t.module.__name__: env_docname(t.env_id) for t in tasks()}
 
 
 def process_docstring(app, what, name, obj, options, lines):
     module = getattr(obj, "__module__", None) if what == "class" else name
     markdown = next((i for i, line in enumerate(lines) if line.startswith("## ")), None)
     if markdown is not None:
-        env_id = _ENV_PAGES.get(module)
+        page = env_pages().get(module)
         del lines[markdown:]
-        if env_id is not None:
+        if page is not None:
             lines += ["", f"Observation, action, reward, episode end and presets: "
-                          f":doc:`/{env_page(env_id)}`.", ""]
+                          f":doc:`/{page}`.", ""]
         else:
             lines += ["", "Observation, reward, episode end and arguments of every "
                           "environment: :doc:`/environments/index`.", ""]

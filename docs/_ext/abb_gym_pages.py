@@ -3,12 +3,9 @@
 One page per environment id (``environments/<id>.md``), the preset and scene references and
 the literature checks are written from the code, so that they cannot drift from it:
 
-* :func:`tasks` lists the environments: every id in ``abb_gym.envs.ENV_IDS`` with its
-  Gymnasium registration and its action model (the environment class of the registered
-  vector entry point's ``kind``).  It is the one place that enumerates them: when
-  ``abb_gym/envs/`` declares its tasks in a registry (one declaration per task: id, action
-  model, observation spec, episode parameters), :func:`tasks` reads that registry and every
-  page follows.
+* :func:`tasks` lists the environments from the task registry (``abb_gym.envs.tasks``: one
+  row per id with its action model, classes, default scene and preset), so a task registered
+  there gets its page with nothing to add here.
 * The text of an environment page is its module's docstring (Description, Action Space,
   Episode length) and ``abb_gym.envs.base.COMMON_DOC`` (Observation Space, Rewards, Starting
   State, Episode End, Info, Arguments, Bad input), converted from their Markdown-with-roles to
@@ -35,7 +32,6 @@ from types import ModuleType
 
 DOCS = Path(__file__).resolve().parents[1]
 REPO = DOCS.parent
-DEFAULT_SCENE, DEFAULT_PRESET = "yoshida_odd", "train"
 VALIDATION_TESTS = ("test_validation.py", "test_model.py", "test_analysis_lu_hung.py",
                     "test_analysis_spannan.py", "test_analysis_rotating_frame.py",
                     "test_analysis_rezaee_fathi.py", "test_analysis_timedomain.py",
@@ -46,42 +42,26 @@ VALIDATION_TESTS = ("test_validation.py", "test_model.py", "test_analysis_lu_hun
 
 @dataclass(frozen=True)
 class Task:
-    """One registered environment id, as the pages need it."""
+    """One environment id as the pages need it: its row of the task registry and the module
+    that documents it."""
 
-    env_id: str
-    kind: str                     # action model: "speed", "torque", "dwell"
-    module: ModuleType            # its module, whose docstring describes it
-    entry_point: str
-    vector_entry_point: str
-    max_episode_steps: int | None  # registered (None: gym.make wraps its own TimeLimit)
+    row: object                   # abb_gym.envs.tasks.Task
+    module: ModuleType            # the environment's module, whose docstring describes it
+
+    @property
+    def env_id(self) -> str:
+        return self.row.env_id
 
 
 def tasks() -> list[Task]:
-    """Every environment id of the package (the one place to re-point at a task registry)."""
+    """Every environment id of the package, from the task registry
+    (``abb_gym.envs.tasks.TASKS``, one row per id: action model, classes, default scene and
+    preset, registered steps), in registration order."""
     import importlib
 
-    import gymnasium as gym
-
-    from abb_gym import envs
-    from abb_gym.envs.base import BalancerEnv
-    for name in envs.__all__:   # the environment classes load on first use
-        getattr(envs, name)
-    by_kind = {cls.kind: cls for cls in _subclasses(BalancerEnv)}
-    out = []
-    for env_id in envs.ENV_IDS:
-        spec = gym.spec(env_id)
-        module_name, _, cls_name = str(spec.vector_entry_point).partition(":")
-        kind = getattr(importlib.import_module(module_name), cls_name).kind
-        out.append(Task(env_id, kind, importlib.import_module(by_kind[kind].__module__),
-                        str(spec.entry_point), str(spec.vector_entry_point),
-                        spec.max_episode_steps))
-    return out
-
-
-def _subclasses(cls):
-    for sub in cls.__subclasses__():
-        yield sub
-        yield from _subclasses(sub)
+    from abb_gym.envs import tasks as registry
+    return [Task(row, importlib.import_module(registry.env_class(row).__module__))
+            for row in registry.TASKS.values()]
 
 
 def env_docname(env_id: str) -> str:
@@ -128,12 +108,12 @@ def _num(x: float) -> str:
 
 # --- the environment pages -----------------------------------------------------------------
 
-def observation_rows(kind: str, scene: str, preset: str, **kwargs) -> list[list[str]]:
+def observation_rows(env_id: str, scene: str, preset: str, **kwargs) -> list[list[str]]:
     """Index, name and bounds of every observation entry of an environment as ``gym.make``
     builds it (``kwargs``: observe_balls and preset overrides)."""
     from abb_gym.envs.setup import EnvSetup
     observe_balls = kwargs.pop("observe_balls", False)
-    setup = EnvSetup(kind, scene, preset, observe_balls, None, kwargs)
+    setup = EnvSetup(env_id, scene, preset, observe_balls, None, kwargs)
     space = setup.observation_space
     return [[str(i), f"`{name}`", f"[{_num(lo)}, {_num(hi)}]"]
             for i, (name, lo, hi) in enumerate(zip(setup.obs_names, space.low, space.high))]
@@ -141,20 +121,26 @@ def observation_rows(kind: str, scene: str, preset: str, **kwargs) -> list[list[
 
 def episode_rows(task: Task) -> list[list[str]]:
     """Per shipped scene: operating and critical speed, control interval, episode length and
-    steps under the default preset, and the presets refused on it (with the reason)."""
+    steps under the task's default preset, and the presets refused on it (with the reason)."""
     from abb_gym import list_scenes, load_scene
     from abb_gym.envs import episode_steps, list_presets
     from abb_gym.envs.setup import EnvSetup
     rows = []
     for name in list_scenes():
         scene = load_scene(name)
-        setup = EnvSetup(task.kind, name, DEFAULT_PRESET, False, None, {})
         refused = []
         for preset in list_presets():
             try:
                 episode_steps(task.env_id, scene=name, preset=preset)
             except ValueError as exc:
                 refused.append(f"`{preset}` ({_first_clause(str(exc))})")
+        try:
+            setup = EnvSetup(task.env_id, name, None, False, None, {})
+        except ValueError as exc:
+            rows.append([f"`{name}`", "", _num(scene.critical_speed), "", "", "",
+                         f"every preset with the default `{task.row.default_preset}` "
+                         f"({_first_clause(str(exc))})"])
+            continue
         rows.append([f"`{name}`", _num(setup.operating_speed), _num(scene.critical_speed),
                      _num(setup.control_interval), _num(setup.episode_length),
                      str(episode_steps(task.env_id, scene=name)), "; ".join(refused) or "-"])
@@ -197,71 +183,74 @@ def env_page(task: Task) -> str:
     """The page of one environment id (MyST Markdown)."""
     from abb_gym.envs.base import COMMON_DOC
     from abb_gym.envs.setup import EnvSetup
+    from abb_gym.envs.tasks import env_class, vector_class
+    row = task.row
+    scene, preset = row.default_scene, row.default_preset
     lead, own = sections(task.module.__doc__)
     _, common = sections(COMMON_DOC)
-    setup = EnvSetup(task.kind, DEFAULT_SCENE, DEFAULT_PRESET, False, None, {})
-    title = task.env_id
+    setup = EnvSetup(task.env_id, scene, preset, False, None, {})
     summary = lead.split(":", 1)[1].strip() if ":" in lead.splitlines()[0] else lead
     summary = summary[:1].upper() + summary[1:]
     limit = ("its own episode length (`gym.make` wraps a `TimeLimit` of exactly that many "
-             "steps)" if task.max_episode_steps is None else
-             f"{task.max_episode_steps} (a backstop; episodes are one step)")
+             "steps)" if row.registered_steps is None else
+             f"{row.registered_steps} (a backstop; episodes are one step)")
+    single, vector = env_class(row), vector_class(row)
     facts = md_table(["", ""], [
         ["Action space", f"`{setup.action_space}`"],
-        ["Observation space", f"`Box({setup.obs_dim},)` float32 on `{DEFAULT_SCENE}` / "
-                              f"`{DEFAULT_PRESET}` (the entries below)"],
-        ["Make", f'`gym.make("{task.env_id}")`'],
+        ["Observation space", f"`Box({setup.obs_dim},)` float32 on `{scene}` / `{preset}` "
+                              "(the entries below)"],
+        ["Make", f'`gym.make("{task.env_id}")`: scene `{scene}`, preset `{preset}`'],
         ["Vector environment", f'`gym.make_vec("{task.env_id}", num_envs=N, '
                                f'vectorization_mode="vector_entry_point")`'],
-        ["Entry points", f"`{task.entry_point}`, vector `{task.vector_entry_point}`"],
+        ["Action model", f"`{row.action}`"],
+        ["Held-out preset", f"`{row.test_preset}`"],
         ["max_episode_steps", limit],
     ])
-    obs = md_table(["index", "name", "bounds"],
-                   observation_rows(task.kind, DEFAULT_SCENE, DEFAULT_PRESET))
-    extra = md_table(["index", "name", "bounds"], observation_rows(
-        task.kind, DEFAULT_SCENE, DEFAULT_PRESET, observe_balls=True,
-        sync_vibration={"enabled": True})[setup.frame_dim:])
+    obs = md_table(["index", "name", "bounds"], observation_rows(task.env_id, scene, preset))
+    names = set(setup.obs_names)
+    extra = md_table(["index", "name", "bounds"], [
+        r for r in observation_rows(task.env_id, scene, preset, observe_balls=True,
+                                    sync_vibration={"enabled": True})
+        if r[1].strip("`") not in names])
     episodes = md_table(["scene", "operating speed [rad/s]", "critical speed [rad/s]",
                          "control interval [s]", "episode length [s]", "steps",
                          "presets refused"], episode_rows(task))
+    own_sections = [part for title, body in own.items()
+                    if title not in ("Description", "Action Space", "Episode length")
+                    for part in (f"## {title}", "", to_myst(body), "")]
     parts = [
         "<!-- generated by docs/_ext/abb_gym_pages.py from the package: edit the code -->",
-        f"# {title}", "", to_myst(summary), "", facts, "",
+        f"# {task.env_id}", "", to_myst(summary), "", facts, "",
         "## Description", "", to_myst(own.get("Description", "")), "",
         "## Action Space", "", to_myst(own.get("Action Space", "")), "",
         "## Observation Space", "",
         to_myst(common["Observation Space"]), "",
-        f"The entries on `{DEFAULT_SCENE}` with the `{DEFAULT_PRESET}` preset "
+        f"The entries on `{scene}` with the `{preset}` preset "
         f"(`env.unwrapped.observation_names` gives the same list):", "", obs, "",
-        "With `observe_balls=True` and `sync_vibration={\"enabled\": True}` these follow "
-        "(the `varied` presets switch the synchronous vibration on):", "", extra, "",
+        "With `observe_balls=True` and `sync_vibration={\"enabled\": True}` the entries "
+        "below are added (the indices of this layout):", "", extra, "",
         "## Rewards", "", to_myst(common["Rewards"]), "",
         "## Starting State", "", to_myst(common["Starting State"]), "",
         "## Episode End", "", to_myst(common["Episode End"]), "",
         "### Episode length", "", to_myst(own.get("Episode length", "")), "",
-        f"Under the default preset `{DEFAULT_PRESET}` on each shipped scene (steps: "
+        f"Under the default preset `{preset}` on each shipped scene (steps: "
         "`abb_gym.envs.episode_steps`, which is `env.spec.max_episode_steps`):", "",
         episodes, "",
+        *own_sections,
         "## Presets", "",
-        "Any preset works with any id; the table is the same for every environment. "
-        "Fields and ranges: [Presets](presets.md).", "",
+        "The shipped presets (fields and ranges: [Presets](presets.md)):", "",
         md_table(["preset", "use", "control interval [s]", "randomised per episode",
                   "observation"], preset_rows()), "",
         "## Info", "", to_myst(common["Info"]), "",
         "## Arguments", "", to_myst(common["Arguments"]), "",
         "## Bad input", "", to_myst(common["Bad input"]), "",
         "## API", "",
-        f"{{py:class}}`{task.module.__name__}."
-        f"{_class_name(task)}`, vector {{py:class}}`{task.vector_entry_point.replace(':', '.')}`.",
+        f"{{py:class}}`{single.__module__}.{single.__qualname__}`, vector "
+        f"{{py:class}}`{vector.__module__}.{vector.__qualname__}`; the task's row: "
+        f"{{py:mod}}`abb_gym.envs.tasks`.",
         "",
     ]
     return "\n".join(parts)
-
-
-def _class_name(task: Task) -> str:
-    from abb_gym.envs.base import BalancerEnv
-    return next(c.__name__ for c in _subclasses(BalancerEnv) if c.kind == task.kind
-                and c.__module__ == task.module.__name__)
 
 
 def environments_table() -> str:

@@ -1,0 +1,78 @@
+"""The laundry oracle: the best a drive that knew the load could do on SpinRedistribute.
+
+``baseline:laundry_oracle`` knows each sub-environment's laundry imbalance U (privileged: it
+reads the machine, not the observation) and the balancer's effective capacity ``C_eff``
+(:func:`abb_gym.physics.laundry.effective_capacity`: the clumped balls span an arc).  While
+``U > C_eff`` and redistributions are left, it keeps the drum at rest, below the tumble
+speed, so the laundry tumbles and lands anew after the tumble time; as soon as the load fits
+(or none is left) it runs the tuned ``knots`` profile (``baseline:knots``, the best single
+open-loop profile) from that moment.  A load above the capacity leaves a residual
+``(U - C_eff)`` that no profile removes, so this is the ceiling of the redistribution decision:
+it pays the least time a redistribution can cost and only when it must.
+
+It is an upper bound on the decision, not on everything: it does not see the balls, and it
+spends a tumble even when the next draw is worse.  Used on other tasks it is the tuned
+``knots`` profile (no redistribution happens there).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..physics import drive_law as dl
+from ..physics import laundry
+from .baseline_policy import SpeedReferencePolicy, make_baseline
+
+__all__ = ["LaundryOracle", "ORACLE_NAME"]
+
+ORACLE_NAME = "laundry_oracle"
+
+
+class LaundryOracle(SpeedReferencePolicy):
+    """See the module docstring."""
+
+    def __init__(self):
+        self.name = f"baseline:{ORACLE_NAME}"
+        self.params: dict[str, Any] = {}
+
+    def acts_on(self, setup: Any) -> bool:
+        return not setup.task.one_step
+
+    def reset(self, env, mask: np.ndarray) -> None:
+        self._bind(env)
+        setup = self.setup
+        knots = make_baseline("knots", setup.scene, setup.operating_speed)
+        self.params = {"knots": dict(knots.params)}
+        profile = knots._profile(0)
+        rows = profile.segment_table(math.inf)[1]
+        self._tables = np.zeros((1, len(rows), dl.N_DRIVE))
+        self._tables[0] = rows
+        self._n_rows = np.array([len(rows)], dtype=np.int64)
+        self.capacity = laundry.effective_capacity(setup.scene)
+        r = setup.config.redistribution
+        self.max_count = int(r.max_count) if r.enabled else 0
+        n = env.num_envs
+        if not hasattr(self, "_start") or self._start.shape[0] != n:
+            self._start = np.full(n, np.nan)
+        self._start[np.asarray(mask, bool)] = np.nan
+
+    def act(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        env = self._env
+        t = env.times
+        w = env.rotor_speeds
+        waiting = np.isnan(self._start)
+        fits = (env.imbalances <= self.capacity) | (env.redistributions >= self.max_count)
+        go = waiting & fits
+        self._start[go] = t[go]
+        ref = np.zeros_like(t)
+        live = ~np.isnan(self._start)
+        if live.any():
+            elapsed = t[live] - self._start[live] + self.dt
+            tables = np.broadcast_to(self._tables, (int(live.sum()),) + self._tables.shape[1:])
+            counts = np.broadcast_to(self._n_rows, (int(live.sum()),))
+            ref[live] = dl.prescribed_speeds(np.ascontiguousarray(elapsed),
+                                             np.ascontiguousarray(tables),
+                                             np.ascontiguousarray(counts))
+        return self._actions(ref, w)

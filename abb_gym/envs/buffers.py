@@ -1,0 +1,139 @@
+"""The arrays of an environment's rows and the blocks its compiled step works in.
+
+:class:`Buffers` holds one row per environment (state, parameters, drive rows, bookkeeping,
+observation, outputs, the recorded history) and the blocks of lanes of the compiled step
+(:mod:`abb_gym.envs.kernel`, :class:`abb_gym.physics.batch.Blocks`).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..physics import batch
+from ..physics import drive_law as dl
+from ..physics import model as mdl
+from ..physics.specialise import resolve_kernel
+from . import kernel
+from .checks import check_memory
+from .kernel import G_HELD, N_G_ENV, observe_rows
+from .layout import (N_OUT, N_ST, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T, T_VIB,
+                     T_VIBMAX, T_W, T_X, T_Y)
+
+__all__ = ["Buffers"]
+
+
+class Buffers:
+    """The preallocated arrays of ``n`` environments (rows), in blocks of lanes for the
+    compiled step (:mod:`abb_gym.envs.kernel`)."""
+
+    def __init__(self, setup: Any, n: int, n_trace: int = 0, kernel: str | None = None,
+                 lanes: int | None = None):
+        check_memory(setup, n, n_trace)
+        nb = setup.scene.ball_count
+        ns = 2 * (3 + nb)
+        self.act = np.zeros((n, setup.n_actions))
+        self.s = np.zeros((n, ns))
+        self.p = np.zeros((n, mdl.N_PARAMS))
+        self.b = np.zeros((n, nb, mdl.N_BALL_PARAMS))
+        self.d = np.zeros((n, setup.n_rows, dl.N_DRIVE))
+        self.st = np.zeros((n, N_ST))
+        self.st[:, S_DONE] = 1.0
+        self.st[:, S_USCALE] = 1.0
+        self.obs = np.zeros((n, setup.frame_dim), dtype=np.float32)
+        # the last frame_stack observations, oldest first (None: no stacking)
+        self.frame_stack = setup.frame_stack
+        self.frames = (np.zeros((n, setup.obs_dim), dtype=np.float32)
+                       if setup.frame_stack > 1 else None)
+        self.out = np.zeros((n, N_OUT))
+        k = setup.max_steps + 1 if n_trace > 0 else 0
+        self.trace = np.zeros((min(n_trace, n), k, T_BALLS + nb))
+        self.active = np.ones(n, dtype=np.uint8)
+        self.cfg = setup.cfg
+        self.blocks = batch.Blocks(n, nb, lanes, int_rows=N_G_ENV,
+                                   precision=setup.config.precision)
+        self.blocks.g[:, G_HELD] = -1  # no lane holds a row yet (kernel.G_HELD)
+        self.order = np.arange(n, dtype=np.int64)
+        self.n_balls = nb
+        # blocks of one lane (a single environment, a few sub-environments): the kernel also
+        # takes the lane count as a constant
+        self.spec = setup.spec | (mdl.SPEC_ONE_LANE if self.blocks.lanes == 1 else 0)
+        self.kernel = resolve_kernel(kernel, self.blocks.lanes, cached_ok=True)
+        self._step = None
+        if self.kernel == "cached":
+            # "auto" on a few lanes: the specialised kernel if it needs no compiling
+            self._step = self._stepper().cached_entry(*self.kernel_args())
+            self.kernel = "generic" if self._step is None else "specialised"
+
+    def step_arrays(self) -> tuple:
+        """The arrays of the compiled step, in the order of
+        :data:`abb_gym.envs.kernel.STEP_ARRAYS`."""
+        return (self.order, self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs,
+                self.out, self.trace, self.active, *self.blocks.arrays())
+
+    def kernel_args(self) -> tuple:
+        """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``: the packed
+        :meth:`step_arrays` (rebuild them after replacing any of those arrays), the ball count
+        and the effect bits."""
+        return kernel.pack_step_arrays(*self.step_arrays()), self.n_balls, self.spec
+
+    def step_function(self):
+        """The compiled step's entry point, called with :meth:`kernel_args` (compiled or
+        loaded from the cache on the first call)."""
+        if self._step is None:
+            self._step = self._stepper().entry(*self.kernel_args(),
+                                               generic=self.kernel == "generic")
+        return self._step
+
+    def _stepper(self):
+        return kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
+
+    def sort_lanes(self) -> None:
+        """Group rows of equal step size into the same blocks (after resets), sorted per
+        thread's run of blocks (:func:`abb_gym.physics.batch.lane_order`)."""
+        # (one block: one run, stepped serially)
+        self.order[:] = batch.lane_order(self.st[:, S_DTMAX], self.blocks.lanes,
+                                         batch.thread_parts())
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_step"] = None  # compiled entry points do not pickle
+        return state
+
+    def history(self, i: int) -> dict[str, np.ndarray]:
+        """Row ``i``'s recorded history so far, one entry per control interval boundary
+        (``t`` [s], ``x``, ``y`` [m], ``rotor_speed`` [rad/s], ``vibration`` (the interval's
+        mean) and ``vibration_max`` [m], ``ball_angles`` [rad] (T, n)); needs a buffer built
+        with a trace for that row (``record_history=True``)."""
+        if i >= self.trace.shape[0]:
+            raise ValueError("no history is recorded: create the environment with "
+                             "record_history=True")
+        rows = self.trace[i, :int(self.st[i, S_K]) + 1]
+        return {"t": rows[:, T_T].copy(), "x": rows[:, T_X].copy(), "y": rows[:, T_Y].copy(),
+                "rotor_speed": rows[:, T_W].copy(), "vibration": rows[:, T_VIB].copy(),
+                "vibration_max": rows[:, T_VIBMAX].copy(), "ball_angles": rows[:, T_BALLS:].copy()}
+
+    def observe(self, rows: np.ndarray) -> None:
+        """Observe ``rows`` after a reset (their frame stacks filled with the first one)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        observe_rows(rows, self.s, self.p, self.b, self.st, self.cfg, self.obs, self.out,
+                     self.trace)
+        self.fill_frames(rows)
+
+    @property
+    def observations(self) -> np.ndarray:
+        """What the environments return: the observations, or their frame stacks."""
+        return self.obs if self.frames is None else self.frames
+
+    def fill_frames(self, rows: np.ndarray) -> None:
+        """Every frame of ``rows`` := their current observation (the start of an episode)."""
+        if self.frames is not None and len(rows):
+            self.frames[rows] = np.tile(self.obs[rows], (1, self.frame_stack))
+
+    def push_frames(self) -> None:
+        """Shift every row's frames by one and append the current observation (after a
+        step)."""
+        if self.frames is not None:
+            d = self.obs.shape[1]
+            self.frames[:, :-d] = self.frames[:, d:].copy()
+            self.frames[:, -d:] = self.obs

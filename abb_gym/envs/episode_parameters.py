@@ -1,0 +1,185 @@
+"""The episode parameters, each declared once.
+
+An episode is the environment's nominal scene changed in the parameters below.  Each is
+declared once here, as an :class:`EpisodeParameter`; from that declaration come
+
+* the preset's ``randomize`` field of the same name (its range, unit and bounds:
+  :class:`abb_gym.envs.config.Randomization` is built from :data:`PARAMETERS`);
+* the draw (uniform over the range, in the order declared here, one ``rng.random`` call per
+  episode: :mod:`abb_gym.envs.episodes`) and, for the parameters marked ``per_event``, the
+  draws of each redistribution of the laundry (:mod:`abb_gym.envs.redistribution`);
+* the reset option of the same name (and its alternative units), checked with the bounds
+  given here;
+* the column of the episode table, the key of the reset ``info`` and the attribute of
+  :class:`~abb_gym.envs.episodes.Episode`;
+* the machine change it makes (:mod:`abb_gym.physics.variants`: its name in
+  :data:`~abb_gym.physics.variants.CHANGES`), or its place in the initial state;
+* the corners of the preset's ranges that are checked when an environment is made (the
+  stiffness of its RK4 steps, a machine that exists);
+* the table in the environments' documentation (:func:`doc_table`).
+
+A new randomised parameter is one more :class:`EpisodeParameter` here (appended: the draws of
+the existing ones stay where they are, so presets that leave it off draw the same episodes)
+and its physics use (a change in :mod:`abb_gym.physics.variants`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["EpisodeParameter", "OptionUnit", "PARAMETERS", "BY_NAME", "RESET_OPTIONS",
+           "doc_table", "randomize_fields"]
+
+PI = math.pi
+
+
+@dataclass(frozen=True)
+class OptionUnit:
+    """A reset option that sets a parameter in other units: ``option`` [``unit``] >= ``lower``
+    gives the parameter's value ``to_value(scene, option)``."""
+
+    name: str
+    unit: str
+    lower: float | None
+    to_value: Callable[[Any, float], float]
+
+
+@dataclass(frozen=True)
+class EpisodeParameter:
+    """One episode parameter (module docstring).
+
+    ``name``: table column, info key (``info_key`` where it differs), reset option.
+    ``randomize``: the preset's ``randomize`` field (range of the drawn number) and
+    ``range_spec`` its declaration (:func:`abb_gym.configuration.declare` keywords);
+    ``from_drawn(scene, u)`` maps a drawn number onto the parameter (default: itself).
+    ``nominal(scene)``: the value when the preset does not randomise it.
+    ``option_lower``/``option_inclusive``: the reset option's bound (None: any finite number);
+    ``option_units``: alternative options, mutually exclusive with the main one.
+    ``per_ball``: one value per ball.  ``angle``: reduced to [-pi, pi].
+    ``machine``: the machine change it makes (:data:`abb_gym.physics.variants.CHANGES`), None
+    for a parameter of the initial state (phase, ball angles).
+    ``step_corner``: the RK4 step depends on it (the preset's corners are checked);
+    ``machine_check``: a value may not be a machine (checked at its corners and as an option).
+    ``per_event``: drawn again at each redistribution of the laundry.  ``factor``: a factor on
+    a scene value (nominal 1), which a training curriculum may narrow towards 1
+    (:mod:`abb_gym.rl.curriculum`).
+    """
+
+    name: str
+    unit: str
+    doc: str
+    nominal: Callable[[Any], Any]
+    randomize: str
+    range_spec: dict
+    from_drawn: Callable[[Any, Any], Any] | None = None
+    option_lower: float | None = 0.0
+    option_inclusive: bool = True
+    option_units: tuple[OptionUnit, ...] = ()
+    per_ball: bool = False
+    angle: bool = False
+    machine: str | None = None
+    step_corner: bool = False
+    machine_check: bool = False
+    per_event: bool = False
+    factor: bool = False
+    info_key: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        """The key of the reset ``info``."""
+        return self.info_key or self.name
+
+    def drawn(self, scene: Any, u):
+        """The parameter from the uniform numbers ``u`` mapped onto the range already."""
+        return u if self.from_drawn is None else self.from_drawn(scene, u)
+
+
+def _capacity(scene: Any, ratio):
+    return ratio * scene.balancing_capacity
+
+
+#: Every episode parameter, in the order of the draws (append new ones at the end).
+PARAMETERS: tuple[EpisodeParameter, ...] = (
+    EpisodeParameter(
+        "imbalance", "kg m", "primary imbalance U0 (the load's), drawn as a ratio of the "
+        "balancing capacity sum m_i R", nominal=lambda sc: float(sc.imbalance),
+        randomize="imbalance_ratio",
+        range_spec=dict(kind="range", gt=0.0, le=100.0, nullable=True,
+                        doc="imbalance / balancing capacity (sum m_i R)"),
+        from_drawn=_capacity,
+        option_units=(OptionUnit("imbalance_ratio", "-", 0.0, _capacity),),
+        machine="imbalance", per_event=True),
+    EpisodeParameter(
+        "imbalance_phase", "rad", "angle of the imbalance at t = 0 (fixed frame) and from the "
+        "rotor's reference mark", nominal=lambda sc: 0.0, randomize="imbalance_phase",
+        range_spec=dict(kind="range", unit="rad", ge=-2 * PI, le=2 * PI, nullable=True,
+                        doc="angle of the imbalance at t = 0 (fixed frame)"),
+        option_lower=None, angle=True, per_event=True),
+    EpisodeParameter(
+        "ball_angles", "rad", "each ball's initial angle from the imbalance",
+        nominal=lambda sc: np.asarray(sc.ball_angles0, dtype=float), randomize="ball_angles",
+        range_spec=dict(kind="range", unit="rad", ge=-2 * PI, le=2 * PI, nullable=True,
+                        doc="each ball's initial angle from the imbalance"),
+        option_lower=None, per_ball=True, angle=True, info_key="initial_ball_angles"),
+    EpisodeParameter(
+        "ball_drag_scale", "-", "factor on the scene's race drag", nominal=lambda sc: 1.0,
+        randomize="ball_drag_scale",
+        range_spec=dict(kind="range", gt=0.0, le=1e3, nullable=True,
+                        doc="factor on the scene's ball_drag"),
+        option_inclusive=False, machine="ball_drag_scale", step_corner=True, factor=True),
+    EpisodeParameter(
+        "rolling_resistance_scale", "-", "factor on the scene's rolling resistance",
+        nominal=lambda sc: 1.0, randomize="rolling_resistance_scale",
+        range_spec=dict(kind="range", ge=0.0, le=1e3, nullable=True,
+                        doc="factor on the scene's ball_rolling_resistance"),
+        machine="rolling_resistance_scale", step_corner=True, factor=True),
+    EpisodeParameter(
+        "critical_speed_scale", "-", "factor s on the critical speeds, through the supported "
+        "mass M / s^2 (a load)", nominal=lambda sc: 1.0, randomize="critical_speed_scale",
+        range_spec=dict(kind="range", gt=0.0, le=10.0, nullable=True,
+                        doc="factor s on the critical speeds, through the supported mass "
+                            "M / s^2 (a load; module docstring)"),
+        option_inclusive=False, machine="critical_speed_scale", step_corner=True,
+        machine_check=True, factor=True),
+    EpisodeParameter(
+        "support_damping_scale", "-", "factor on the scene's support damping (both axes)",
+        nominal=lambda sc: 1.0, randomize="support_damping_scale",
+        range_spec=dict(kind="range", ge=0.0, le=1e3, nullable=True,
+                        doc="factor on the scene's support damping (both axes)"),
+        machine="support_damping_scale", step_corner=True, machine_check=True, factor=True),
+    EpisodeParameter(
+        "fluid_temperature", "K", "temperature of the balancer fluid (its viscosity; scenes "
+        "with a fluid preset that has a temperature law)",
+        nominal=lambda sc: float(sc.fluid_temperature), randomize="fluid_temperature",
+        range_spec=dict(kind="range", unit="K", ge=250.0, le=400.0, nullable=True,
+                        doc="temperature of the balancer fluid (a wash temperature; scenes "
+                            "with an oil of Spannan's Table 6.1)"),
+        option_lower=250.0, machine="fluid_temperature", step_corner=True,
+        machine_check=True),
+)
+
+BY_NAME: dict[str, EpisodeParameter] = {par.name: par for par in PARAMETERS}
+
+#: Every reset option: each parameter's name and its alternative units.
+RESET_OPTIONS: tuple[str, ...] = tuple(
+    name for par in PARAMETERS for name in (par.name, *(u.name for u in par.option_units)))
+
+
+def randomize_fields() -> list[tuple[str, dict]]:
+    """The preset's ``randomize`` fields: (name, declaration keywords), in draw order."""
+    return [(par.randomize, par.range_spec) for par in PARAMETERS]
+
+
+def doc_table() -> str:
+    """A Markdown table of the episode parameters (the environments' documentation)."""
+    rows = ["| Parameter | Unit | Preset range (``randomize``) | Reset option(s) | Meaning |",
+            "|---|---|---|---|---|"]
+    for par in PARAMETERS:
+        options = ", ".join(f"``{n}``" for n in (par.name, *(u.name for u in par.option_units)))
+        rows.append(f"| {par.key} | {par.unit} | ``{par.randomize}`` | {options} | "
+                    f"{par.doc}{'; redrawn at each redistribution' if par.per_event else ''} |")
+    return "\n".join(rows)
