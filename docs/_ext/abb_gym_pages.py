@@ -237,8 +237,8 @@ def env_page(task: Task) -> str:
         "`abb_gym.envs.episode_steps`, which is `env.spec.max_episode_steps`):", "",
         episodes, "",
         *own_sections,
-        "## Presets", "",
-        "The shipped presets (fields and ranges: [Presets](presets.md)):", "",
+        "## The shipped presets", "",
+        "Every preset of `configs/envs/` (fields and ranges: [Presets](presets.md)):", "",
         md_table(["preset", "use", "control interval [s]", "randomised per episode",
                   "observation"], preset_rows()), "",
         "## Info", "", to_myst(common["Info"]), "",
@@ -255,12 +255,16 @@ def env_page(task: Task) -> str:
 
 def environments_table() -> str:
     """The table of every id for the environments index (and the README's table)."""
+    found = [(task, *sections(task.module.__doc__)) for task in tasks()]
+    # the action's table of the first task that has one, for tasks that share its action model
+    by_action: dict[str, str] = {}
+    for task, _, own in found:
+        by_action.setdefault(task.row.action, _action_summary(own.get("Action Space", "")))
     rows = []
-    for task in tasks():
-        lead, own = sections(task.module.__doc__)
+    for task, lead, own in found:
         summary = lead.split(":", 1)[1].strip().rstrip(".") if ":" in lead else lead
         summary = summary[:1].upper() + summary[1:]
-        action = _action_summary(own.get("Action Space", ""))
+        action = _action_summary(own.get("Action Space", "")) or by_action[task.row.action]
         rows.append([f"[`{task.env_id}`](/{env_docname(task.env_id)}.md)",
                      to_myst(summary), action])
     return md_table(["id", "task", "action (Box [-1, 1])"], rows)
