@@ -428,7 +428,7 @@ def _check_took_effect(native, kwargs, vector):
                         continue
                     got = getattr(getattr(cfg, key), sub)
                     assert got == _expected(SECTION_SPECS[key][sub], v), (key, sub, v)
-    if "scene" in kwargs:
+    if kwargs.get("scene") is not None:  # (None: the task's default scene)
         assert native.scene.name == kwargs["scene"]
     setup = native.setup
     nb = setup.scene.ball_count

@@ -143,7 +143,7 @@ def _run_candidates(task: CandidateTask) -> list[dict]:
     pairs = [(c, k) for c in range(len(task.candidates)) for k in task.episodes]
     chunk = Chunk(task.env_id, task.scene, task.preset, f"sweep:{task.family}", task.seed,
                   tuple(k for _, k in pairs), env_kwargs=task.env_kwargs,
-                  reset_options=task.reset_options)
+                  reset_options=task.reset_options, hold=0.0)  # a candidate's score: its return
     episodes, _ = run_chunk(chunk, _policy_for(task, pairs))
     for (c, _), row in zip(pairs, episodes):
         row["candidate"] = c

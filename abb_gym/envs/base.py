@@ -76,6 +76,8 @@ COMMON_DOC = textwrap.dedent(r"""
     | failure | terminal: -(w_failure + R_max * (T_episode - t) / T_ref + w_residual * c / A_op) |
 
     * ``r_mean``: the vibration radius averaged over the interval's RK4 steps.
+    * With ``reward.length_scale`` set (SpinRedistribute: 1 mm), ``A_peak = A_op`` is that
+      length: vibration and residual in that unit, the same for every episode.
     * ``A_peak``, ``A_op``: the same machine with its balancer off (this episode's total mass
       ``M`` and support, this episode's imbalance U; :func:`abb_gym.physics.rotor.
       reference_amplitudes`): the steady Jeffcott amplitude ``U w^2 / sqrt((k - M w^2)^2 +
@@ -129,6 +131,9 @@ COMMON_DOC = textwrap.dedent(r"""
       term is paid and ``info["failure"]`` says what happened; the observation is that of the
       last finite state.
     * truncated: ``episode_length`` has elapsed; the residual term is paid (see Rewards).
+    * With redistribution of the laundry (SpinRedistribute), an unbroken ``tumble_time``
+      below the tumble speed redistributes it (:mod:`abb_gym.envs.redistribution`): the
+      episode goes on with the new load.
       The environment truncates itself (episode lengths depend on the scene); ``gym.make``
       wraps the RunUp* environments in a ``TimeLimit`` of exactly this length
       (``env.spec.max_episode_steps``; see :mod:`abb_gym.envs`).
@@ -167,6 +172,7 @@ COMMON_DOC = textwrap.dedent(r"""
     | time_above_band | time spent above the band [s] (overspeed) |
     | balanced | residual imbalance within ``balance_tolerance`` of the best the balls can do |
     | residual_imbalance_ratio | abs(U0 + sum m_i (E e^{i gam} + R e^{i ph_i})) / U0 |
+    | redistributions | redistributions of the laundry so far (0 without redistribution) |
     | failure | only on a failure: what happened |
 
     At reset, ``info`` also holds the episode's parameters (the table under Starting State, by

@@ -13,8 +13,8 @@ import numpy as np
 
 from ..physics import runup
 from .step_rows import StepRows, read_step
-from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_PEAK, TERM_COLUMNS,
-                     TERM_NAMES)
+from .layout import (O_BAL, O_FCODE, O_IMB, O_R, O_RDYN, S_ACC, S_K, S_NREDIST, S_PEAK,
+                     TERM_COLUMNS, TERM_NAMES)
 
 __all__ = ["step_info", "masked"]
 
@@ -41,6 +41,7 @@ STEP_KEYS = {
     "time_above_band": ("st", S_ACC + runup.R_OVER_T, "value"),
     "balanced": ("out", O_BAL, "bool"),
     "residual_imbalance_ratio": ("out", O_IMB, "value"),
+    "redistributions": ("st", S_NREDIST, "value"),
 }
 
 

@@ -20,11 +20,46 @@ As RunUpSpeed (:mod:`abb_gym.envs.speed`): ``Box(-1, 1, (1,), float32)``, the ro
 acceleration ``a * drive_max_acceleration`` [rad/s^2] over the control interval, the speed
 kept in [0, w_op].
 
+## Observation
+
+What a washer's drive measures (the Observation Space table below): the drum speed, the
+housing's vibration and its filtered amplitude, the synchronous (1x) vibration's amplitude and
+phase against the drum's reference mark (``sync_vibration``, on in the ``laundry`` presets:
+lag 0.5 s, read-out noise 0.002 A_v), the time fraction, the last action and the number of
+redistributions so far (over ``redistribution.max_count``).  Not the load: at the
+distribution speed (90-100 rpm, below the tub's modes) the vibration grows with the load, but
+the balls, which drift towards the heavy side below resonance, add to it, so it is a noisy
+sign of a load the balls cannot cancel.
+
+## Rewards
+
+The terms of the Rewards table, with the ``laundry`` preset's weights and unit
+(``reward.length_scale`` = 1 mm):
+
+| Term | Weight | Meaning here |
+|------|--------|--------------|
+| residual | 6 per mm | the orbit at spin over the settling window (10 s) |
+| time | 1 per T_ref = 25.1 s | every interval spent off spin |
+| failure | 10 + the bound of the rest | a cabinet hit (the whirl beyond the housing clearance) |
+| vibration, effort | 0 | - |
+
+A retry from spin (down to a tumble, the tumble time, back up: about 44 s off spin) costs
+44 / 25.1 = 1.75, about what a 0.3 mm residual costs (6 x 0.3 = 1.8).  A load beyond the
+balancer's effective capacity ``C_eff`` (:func:`abb_gym.physics.laundry.effective_capacity`)
+leaves a residual ``(U - C_eff)``, its steady orbit at spin, whatever the profile: the
+open-loop floor.
+
+## Episode End
+
+As RunUpSpeed's: success after ``settle_time`` (10 s) at spin, failure at a cabinet hit, and
+truncation after ``episode_length`` (300 s).  Leaving the band before the settling window
+completes (to redistribute) starts the window again.
+
 ## Presets
 
 ``laundry`` (training) and ``laundry_test`` (held out), ``configs/envs/``; the task fixes
-``redistribution.enabled``.  The reward measures the vibration in millimetres
-(``reward.length_scale: 1e-3``).
+``redistribution.enabled``.  Scenes: ``washer`` (the default) and ``washer_reduced`` (four
+heavier balls of the same capacity, three times cheaper: the training scene).
 """
 from __future__ import annotations
 

@@ -149,7 +149,8 @@ def get(env_id: Any) -> Task:
     if isinstance(env_id, Task):
         return env_id
     if not isinstance(env_id, str) or env_id not in TASKS:
-        raise ValueError(f"unknown environment {env_id!r:.80}; use one of {list(TASKS)}")
+        raise ValueError(f"unknown environment {env_id!r:.80}: env_id must be one of "
+                         f"{list(TASKS)}")
     return TASKS[env_id]
 
 

@@ -28,6 +28,7 @@ from tqdm import tqdm
 
 from ..physics.rotor import spinning_inertia
 from ..envs import tasks
+from ..envs.episode_parameters import PARAMETERS
 from . import metrics as mt
 from .registry import Policy, resolve
 from .statistics import mean_interval, share_ci
@@ -52,6 +53,9 @@ class Chunk:
     # reset options for every episode of the chunk (e.g. ``ball_angles``: the same machines
     # with the balls started elsewhere); values as tuples, so that a chunk stays hashable
     reset_options: tuple[tuple[str, Any], ...] = ()
+    # the hold after each settled episode that measures its balancing [s] (0: none, as the
+    # tuner's candidates need only their return): abb_gym.evaluation.metrics.HOLD_TIME
+    hold: float = mt.HOLD_TIME
 
 
 @dataclass
@@ -82,6 +86,12 @@ class EvaluationResult:
 
     def summary(self) -> dict[str, Any]:
         return summarise(self.episodes)
+
+    @property
+    def length_unit(self) -> str:
+        """The unit of the lengths among the metrics (:func:`abb_gym.evaluation.metrics.
+        length_unit`: W_r/e, or the task's unit such as mm)."""
+        return self.episodes[0].get("length_unit", "W_r/e") if self.episodes else "W_r/e"
 
 
 def make_env(env_id: str, scene: str, preset: str, num_envs: int, **env_kwargs):
@@ -126,6 +136,8 @@ def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict
     done = np.zeros(n, bool)
     episodes, rollouts = [None] * n, {}
     name = getattr(policy, "name", chunk.policy)
+    unit, unit_label = mt.length_unit(setup)
+    hold_time = chunk.hold
     while not done.all():
         act = np.asarray(policy.act(obs, info), dtype=np.float32)
         obs, reward, term, trunc, info = env.step(act)
@@ -139,12 +151,14 @@ def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict
             act_j = actions[:counts[j], j].copy()
             final = {key: (v[j] if isinstance(v, np.ndarray) else v) for key, v in info.items()
                      if not key.startswith("_") and key != "reward_terms"}
-            ref_len = native.episode_scene(int(j)).reference_length
+            ref_len = unit or native.episode_scene(int(j)).reference_length
+            hold = (_hold(native, int(j), hist, ref_len, hold_time)
+                    if final["settled"] and hold_time > 0 else None)
             row = mt.rollout_metrics(setup, final, hist, ref_len,
                                      torque=_drive_torque(setup, hist["t"], hist["rotor_speed"],
-                                                          act_j))
+                                                          act_j), hold=hold)
             row.update(episode=k, seed=chunk.seed + k, policy=name, steps=len(act_j),
-                       **{"return": float(ret[j])})
+                       length_unit=unit_label, **{"return": float(ret[j])})
             episodes[j] = row
             if k in chunk.record and k not in rollouts:
                 xs, ys = native.episode(int(j)).static_deflection
@@ -156,6 +170,22 @@ def run_chunk(chunk: Chunk, policy=None, on_step=None) -> tuple[list[dict], dict
             on_step(env, done.copy())
     env.close()
     return episodes, rollouts
+
+
+def _hold(native: Any, j: int, hist: dict, unit: float, hold: float) -> dict[str, float]:
+    """:func:`abb_gym.evaluation.metrics.hold_metrics` of sub-environment ``j``, whose episode
+    just ended at speed: its machine now (the laundry's imbalance after any redistribution),
+    its final state and its recorded vibration."""
+    from ..physics import variants
+    setup = native.setup
+    ep = native.episode(j)
+    scene = variants.variant_scene(ep.nominal, **{
+        **{par.machine: ep.values[par.name] for par in PARAMETERS if par.machine},
+        "imbalance": float(native.imbalances[j])})
+    xs, ys = ep.static_deflection
+    tolerance = mt.balance_tolerance(scene, setup.operating_speed, setup.config.balance_tolerance)
+    return mt.hold_metrics(scene, native.states[j], setup.operating_speed, (xs, ys), hist["t"],
+                           hist["vibration"], setup.config.settle_time, tolerance, unit, hold)
 
 
 def _drive_torque(setup, t, w, act):

@@ -11,7 +11,8 @@
   (episode 0 of the test set); the legend sits beside the axes, long policy names are
   shortened there and given whole in the caption.
 * ``pareto.png`` - the speed-versus-accuracy chart of control: settled run-up time against
-  residual vibration; a family keeps one colour whether swept (small points) or evaluated
+  residual vibration (``balance.png``: the same for balancing, time to balance against the
+  residual after a hold at speed, :mod:`abb_gym.evaluation.metrics`); a family keeps one colour whether swept (small points) or evaluated
   (large markers with 95 % intervals); policies that did not complete every run-up are drawn
   hollow with their success share, and swept points that failed are left out of the Pareto
   front; points that carry a ``label`` of their own (``agents/evaluate.py``'s oracle at other
@@ -32,8 +33,15 @@ from ..tables import markdown_table
 from .evaluate import METRICS, UNITS, EvaluationResult
 from .replay import feedback_value, paired_by_episode
 
-HEADLINE = ("at_speed", "run_up_time", "residual_vibration", "peak_whirl", "first_at_speed",
-            "peak_speed", "time_above_band", "balanced", "return")
+HEADLINE = ("at_speed", "run_up_time", "residual_vibration", "time_to_balance",
+            "residual_after_hold", "peak_whirl", "first_at_speed", "peak_speed",
+            "time_above_band", "balanced", "return")
+
+
+def unit(key: str, results: Sequence[EvaluationResult]) -> str:
+    """The unit of metric ``key`` in ``results``: the task's length unit for lengths."""
+    u = UNITS[key]
+    return results[0].length_unit if u == "W_r/e" and results else u
 
 
 def cell(stat: dict, digits: int = 4, ci_digits: int = 3) -> str:
@@ -55,7 +63,7 @@ def summary_table(results: Sequence[EvaluationResult], keys: Sequence[str] = HEA
         row = {"policy": r.policy, "episodes": s["episodes"]}
         if mixed:  # DwellProfile next to baselines it cannot express (evaluate.policy_env_id)
             row["env"] = r.env_id.split("/")[-1]
-        row.update({f"{k} [{UNITS[k]}]": cell(s[k]) for k in keys})
+        row.update({f"{k} [{unit(k, results)}]": cell(s[k]) for k in keys})
         rows.append(row)
     return markdown_table(rows)
 
@@ -103,7 +111,7 @@ def family_table(columns: dict[str, EvaluationResult], keys: Sequence[str] = GAP
     of each column."""
     rows = [{"": "policy", **{label: base_name(r.policy) for label, r in columns.items()}}]
     for key in keys:
-        row = {"": f"{key} [{UNITS[key]}]"}
+        row = {"": f"{key} [{unit(key, list(columns.values()))}]"}
         row.update({label: cell(r.summary()[key]) for label, r in columns.items()})
         rows.append(row)
     return markdown_table(rows)
@@ -137,7 +145,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         w.writeheader()
         w.writerows(rows)
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
-               "seed": first.seed, "metrics": {k: UNITS[k] for k in METRICS},
+               "seed": first.seed, "metrics": {k: unit(k, results) for k in METRICS},
                "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
                "feedback_value": feedback, "sweep": sweep or []}
@@ -149,6 +157,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
             dict(recorded), out / "timeseries.png",
             f"{first.scene}: policies on test episode {min(results[0].rollouts)}")
     paths["pareto"] = plot_pareto(results, sweep or [], out / "pareto.png")
+    paths["balance"] = plot_pareto(results, [], out / "balance.png", BALANCE_AXES)
     return paths
 
 
@@ -181,10 +190,23 @@ def family_of(policy: str) -> str:
     return name.split(":", 1)[1] if name.startswith("baseline:") else name
 
 
-def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path) -> Path:
+#: the axes of the speed-versus-accuracy charts: (x metric, its label, y metric, its label
+#: with ``{unit}``, the title)
+RUN_UP_AXES = ("run_up_time", "settled run-up time: entry into the operating band for good [s]",
+               "residual_vibration", "residual vibration over the settling window [{unit}]",
+               "Run-up time against residual vibration")
+BALANCE_AXES = ("time_to_balance", "time to balance: the vibration within the balance "
+                "tolerance for good, through a 15 s hold at speed [s]",
+                "residual_after_hold", "residual vibration after a 15 s hold at speed [{unit}]",
+                "Time to balance against residual after a hold")
+
+
+def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path,
+                axes: tuple = RUN_UP_AXES) -> Path:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    xkey, xlabel, ykey, ylabel, name = axes
     fig, ax = plt.subplots(figsize=(10, 5.5), constrained_layout=True)
     cmap = plt.get_cmap("tab10")
     keys = list(dict.fromkeys([s["family"] for s in sweep] +
@@ -196,20 +218,20 @@ def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path) ->
         ok = [s for s in fs if s.get("at_speed", 1.0) >= 1.0]
         bad = [s for s in fs if s.get("at_speed", 1.0) < 1.0]
         named = "label" in fs[0]  # points of their own (the goal's room), not a sweep
-        ax.scatter([s["run_up_time"] for s in ok], [s["residual_vibration"] for s in ok],
+        ax.scatter([s[xkey] for s in ok], [s[ykey] for s in ok],
                    s=90 if named else 16, marker="*" if named else "o",
                    alpha=1.0 if named else 0.5, color=colour[fam],
                    edgecolors="k" if named else "none",
                    label=fs[0]["label"] if named else f"{fam}: swept")
         if bad:
-            ax.scatter([s["run_up_time"] for s in bad], [s["residual_vibration"] for s in bad],
+            ax.scatter([s[xkey] for s in bad], [s[ykey] for s in bad],
                        s=16, alpha=0.5, facecolors="none", edgecolors=colour[fam])
-        pts += [(s["run_up_time"], s["residual_vibration"]) for s in ok]
+        pts += [(s[xkey], s[ykey]) for s in ok]
     failed_any = False
     never = []
     for r in results:
         s = r.summary()
-        x, y, share = s["run_up_time"], s["residual_vibration"], s["at_speed"]["mean"]
+        x, y, share = s[xkey], s[ykey], s["at_speed"]["mean"]
         fam = family_of(r.policy)
         replay = base_name(r.policy).startswith("replay:")
         complete = share >= 1.0
@@ -241,10 +263,9 @@ def plot_pareto(results: Sequence[EvaluationResult], sweep: list[dict], path) ->
         for x, c, label in never:
             ax.plot(x, strip, "X", ms=9, color=c, mec="k", label=label)
         ax.set_ylim(lo, strip + 0.06 * (hi - lo))
-    ax.set_xlabel("settled run-up time: entry into the operating band for good [s]")
-    ax.set_ylabel("residual vibration over the settling window, W_r / e [-]")
-    title = f"Run-up time against residual vibration ({results[0].scene})" if results \
-        else "Run-up time against residual vibration"
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel.format(unit=unit(ykey, results)))
+    title = f"{name} ({results[0].scene})" if results else name
     if failed_any or any(s.get("at_speed", 1.0) < 1.0 for s in sweep):
         title += "\nhollow: some run-ups never completed (residual over the completed ones)"
     ax.set_title(title, fontsize=10)
