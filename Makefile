@@ -4,15 +4,18 @@
 #   make test   - create .venv, install abb-gym with its training and test extras (SB3, CPU
 #                 torch, Ray), run the default test suite
 # Long runs (training, sweeps, random fuzzing, repeats) are opt-in: make test-slow, make bench,
-# make fuzz, make repeat N=20.
+# make fuzz, make repeat N=20.  make docs builds the documentation site (docs/, strict).
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
-# torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages
-PIP_INSTALL := $(PIP) install -q -c constraints.txt
+# torch is pinned to the CPU wheel on disk: an unpinned torch pulls several GB of CUDA packages.
+# An editable install of a package whose data folders map into it (pyproject.toml: package-dir)
+# goes through setuptools' import finder, which prints a 10-line notice on every install; only
+# that notice is silenced, every other warning of the build still shows
+PIP_INSTALL := PYTHONWARNINGS="ignore:Editable installation" $(PIP) install -q -c constraints.txt
 
-.PHONY: setup demo test test-slow fuzz repeat bench kernels wheel clean
+.PHONY: setup demo test test-slow fuzz repeat bench kernels wheel docs clean
 
 setup: $(VENV)/.installed
 
@@ -28,6 +31,10 @@ $(VENV)/.installed-core: $(VENV)/.created pyproject.toml constraints.txt
 
 $(VENV)/.installed: $(VENV)/.created pyproject.toml constraints.txt
 	$(PIP_INSTALL) -e ".[train,test]"
+	touch $@
+
+$(VENV)/.installed-docs: $(VENV)/.installed
+	$(PIP_INSTALL) -e ".[docs]"
 	touch $@
 
 demo: $(VENV)/.installed-core
@@ -69,7 +76,13 @@ kernels: setup
 wheel: kernels
 	$(PY) -m pip wheel . --no-deps -q -w dist
 
+# the site in docs/_build/html, from the sources: -W fails on any warning (a docstring that does
+# not parse, a cross-reference or a link of the built site that resolves to nothing: see
+# docs/_ext/site_check.py), --keep-going lists them all first; -E reads every page again
+docs: $(VENV)/.installed-docs
+	$(PY) -m sphinx -b html -W --keep-going -E -q docs docs/_build/html
+
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out docs/_build docs/api/abb_gym*.rst
 	find abb_gym -name '*.nbi' -delete -o -name '*.nbc' -delete
 	rm -f abb_gym/_kernels/numba-sources.sha1

@@ -1,6 +1,6 @@
 """Names of a package that load their module on first use (PEP 562), so that importing the
-package stays light (``import abb_gym`` loads no numba: README "Compiled kernels and the first
-start")."""
+package stays light: ``import abb_gym`` loads no numba, which the first use of the simulator
+compiles and loads (docs/getting-started.md, "The first start compiles")."""
 from __future__ import annotations
 
 import importlib

@@ -22,9 +22,8 @@ numba's reference counting (its target option ``_nrt``).  Counted, a function th
 others takes a reference on each array argument at its entry and drops it at its exits, and
 on each view it makes (``k[0]``): an atomic operation in a call the compiler cannot see into,
 so the code around it reloads what the call might have changed.  ``_rk4_step`` made 14 such
-pairs per RK4 step.  Uncounted, the single environment's compiled step went from 5.9 to
-5.3 us (10 RK4 steps) and the vector environment gained 15-30 % (README, "Kernels without
-reference counts").  Such a function may not allocate (numba refuses to compile it), and
+pairs per RK4 step, which uncounted compilation removes (``python -m
+abb_gym.benchmarks.kernel_profile`` shows where the step's time goes).  Such a function may not allocate (numba refuses to compile it), and
 the functions it calls inherit the setting where they set none.  The rule that keeps this
 safe: **no function called, not inlined, from an uncounted function may return an array**
 (or anything else numba counts).  Compiled counted, it would hand the uncounted caller a

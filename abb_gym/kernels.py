@@ -12,8 +12,8 @@ bar, so that the caches hold:
 * the kernels specialised on the default scene (``yoshida_odd``) for the speed-profile and
   torque actions: vectorised for the vector environments of the training configurations, and
   on one lane for the single environment, which takes them whenever they need no compiling
-  (1.2x the general kernel's steps per second on one lane: README, "The single environment
-  on the specialised kernel").
+  (it runs more steps per second than the general kernel on one lane; ``abb-gym bench
+  speed`` measures both).
 
 The wheel ships these caches (``make wheel`` runs :func:`build` first), so a fresh install on
 a machine of the same CPU type starts without compiling; on another CPU, or for another

@@ -1,4 +1,4 @@
-"""Plain-text tables (Markdown) for the command line and the README."""
+"""Plain-text tables (Markdown) for the command line, the reports and the docs pages."""
 from __future__ import annotations
 
 from typing import Any, Iterable, Iterator, Mapping, Sequence

@@ -346,7 +346,7 @@ def _reference(case):
 @pytest.mark.parametrize("case", sorted(CASES))
 @pytest.mark.parametrize("method", ["rk4", "etdrk4", "ros2", "dopri5"])
 def test_every_default_step_meets_the_stated_accuracy(case, method):
-    """The README's 1 % of the peak whirl and 1 deg of the final ball angles against DOP853
+    """The stated 1 % of the peak whirl and 1 deg of the final ball angles against DOP853
     (rtol 1e-12), at the 10 ms output interval (which leaves the default step uncapped).  ROS2
     at its old default (0.4 rad a step) was 28 % off the Yoshida peak."""
     name, drive, t_end = CASES[case]

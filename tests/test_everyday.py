@@ -375,8 +375,8 @@ print(sorted(m for m in ("numba", "scipy", "torch", "matplotlib", "abb_gym.physi
 def test_import_and_every_help_load_no_numba_scipy_torch_or_matplotlib():
     """``import abb_gym`` registers the ids and ``abb-gym [COMMAND] --help`` builds every
     parser without numba (0.2-0.3 s of the 0.5 s budget), scipy, torch or matplotlib; the
-    simulator's names load them on first use (README "Compiled kernels and the first
-    start")."""
+    simulator's names load them on first use (docs/getting-started.md, "The first start
+    compiles")."""
     out = subprocess.run([sys.executable, "-c", LIGHT], capture_output=True, text=True,
                          env=_fresh_env(), timeout=600, cwd=REPO)
     assert out.returncode == 0, out.stderr[-2000:]

@@ -36,6 +36,28 @@ def test_every_subpackage_is_declared_in_pyproject():
     assert "abb_gym._shipped.configs" in data and "abb_gym._shipped.agents" in data
 
 
+def test_every_shipped_data_folder_is_a_declared_package():
+    # setuptools installs a file only as data of a declared package, and warns ("Package would
+    # be ignored") for every folder of data that is not one: each folder under configs/ and
+    # agents/trained/ that holds files is declared, with the files it holds
+    import tomllib
+    setuptools = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    declared = set(setuptools["packages"])
+    roots = {"abb_gym._shipped.configs": REPO / "configs",
+             "abb_gym._shipped.agents": REPO / "agents" / "trained"}
+    patterns = setuptools["package-data"]["*"]
+    for package, root in roots.items():
+        assert setuptools["package-dir"][package] == str(root.relative_to(REPO))
+        for folder in [root, *(p for p in root.rglob("*") if p.is_dir())]:
+            files = [f for f in folder.iterdir() if f.is_file()]
+            if not files:
+                continue
+            name = ".".join([package, *folder.relative_to(root).parts])
+            assert name in declared, f"add {name} to pyproject packages"
+            shipped = [f.name for f in files if any(f.match(pat) for pat in patterns)]
+            assert shipped, f"{folder}: no file matches the package-data patterns {patterns}"
+
+
 def test_resources_find_the_checkouts_files_and_user_folders_come_first(tmp_path, monkeypatch):
     from abb_gym import load_scene, resources
     assert resources.shipped_folder("scenes") == REPO / "configs" / "scenes"
@@ -65,8 +87,19 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     _run([sys.executable, "-m", "abb_gym.cli", "build-kernels", "--quiet"], cwd=REPO,
          env=os.environ, timeout=1800)
     dist = tmp_path / "dist"
-    _run([sys.executable, "-m", "pip", "wheel", str(REPO), "--no-deps", "-q", "-w", str(dist)],
-         cwd=tmp_path, env=os.environ)
+    # -v shows the build backend's output: a clean build prints no setuptools warning (the
+    # licence as a TOML table and "Package would be ignored" for each data folder did)
+    log = _run([sys.executable, "-m", "pip", "wheel", str(REPO), "--no-deps", "-v", "-w",
+                str(dist)], cwd=tmp_path, env=os.environ)
+    for warning in ("Warning:", "Package would be ignored", "deprecated"):
+        assert warning not in log, f"the wheel build warns ({warning!r}):\n{log[-3000:]}"
+    # the metadata a package index shows
+    import zipfile
+    with zipfile.ZipFile(next(dist.glob("abb_gym-*.whl"))) as whl:
+        meta = next(whl.read(n).decode() for n in whl.namelist() if n.endswith("/METADATA"))
+        assert "License-Expression: MIT" in meta and "Author: The abb-gym contributors" in meta
+        assert any(n.endswith("licenses/LICENSE") for n in whl.namelist())
+        assert "Classifier: Topic :: Scientific/Engineering :: Physics" in meta
     wheel = next(dist.glob("abb_gym-*.whl"))
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", str(venv)], cwd=tmp_path, env=os.environ)
@@ -97,7 +130,9 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
                "kernels": {},
                "preset_baselines": sorted(str(p.relative_to(resources.shipped_folder("baselines").parent))
                                           for p in resources.shipped_folder("baselines").parent.glob("*/baselines/*.yaml"))}
-        for env_id in abb_gym.envs.ENV_IDS:
+        # the tasks on the default scene, whose kernels the wheel ships (abb_gym.kernels)
+        for env_id in [t for t in abb_gym.envs.ENV_IDS
+                       if abb_gym.envs.tasks.get(t).default_scene == "yoshida_odd"]:
             env = gym.make(env_id)
             env.reset(seed=0)
             env.step(env.action_space.sample())
@@ -109,6 +144,8 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     assert set(made["scenes"]) == {p.stem for p in (REPO / "configs" / "scenes").glob("*.yaml")}
     assert set(made["agents"]) == {p.name for p in (REPO / "agents" / "trained").iterdir()
                                    if (p / "agent.yml").exists()}
+    from abb_gym.envs import ENV_IDS, tasks
+    assert made["ids"] == [t for t in ENV_IDS if tasks.get(t).default_scene == "yoshida_odd"]
     assert len(made["ids"]) == 3
     # a fresh process finds the one-lane specialised kernels the wheel ships for the default
     # scene's speed and torque actions in the on-disk cache (abb_gym.kernels); DwellProfile

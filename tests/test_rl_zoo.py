@@ -2,7 +2,7 @@
 
 * rl_zoo3 trains every shipped ``configs/ppo/*.yml`` unchanged, with the hyperparameters and
   the policy ``abb-gym train`` reads from the same file (skipped, with the reason, only when
-  rl_zoo3 is not importable: it is not a dependency of the test extra, see README.md);
+  rl_zoo3 is not importable: the ``zoo`` extra brings it, and the ``test`` extra includes it);
 * :func:`zoo_problems` (the zoo's rules, checked without the zoo) passes every shipped config
   and names the key of each problem in a first-wave file;
 * the shipped agents were trained with exactly the shipped configs: their ``config.yml``

@@ -16,8 +16,8 @@ charts treat the oracle like any evaluated policy.
 
 The per-machine search is local and short (60 candidates by default): it stays in the basin of
 its start.  When the tuned profile moved to another basin (the spannan_cfrp ``knots`` re-tuned
-with restarts on 2026-11-23 waited 47 s instead of 40 s), an oracle refining only it fell below
-a PPO agent in return, which an upper bound must not.  :func:`best_of_runs` therefore takes,
+with restarts waited 47 s instead of 40 s), an oracle refining only it fell below a PPO agent
+in return, which an upper bound must not.  :func:`best_of_runs` therefore takes,
 machine by machine, the best of runs from several starts (the tuned profile and the earlier
 tunings a baselines file lists as ``oracle_starts``): every run is a search on the same
 machine, so the best of them is still what a planner that knows the machine reaches with this
@@ -28,9 +28,9 @@ measures separate that knowledge from the rest: :func:`balls_elsewhere` replays 
 oracle profile with the balls started elsewhere, and :func:`run_oracle` with ``ball_draws``
 searches knowing every parameter of the machine but not the balls (each candidate scored on
 several ball starts, the best then run on the machine as drawn).  On the shipped scenes and
-presets (2026-11-24, README "Feedback gap on machines that differ") the oracle's residual gain
-over the tuned ``knots`` does not survive without the balls' start, and the machine alone is
-worth little more than run-up time.
+presets (docs/results.md, "Where the oracle's gain comes from") the oracle's residual
+gain over the tuned ``knots`` does not survive without the balls' start, and the machine alone
+is worth little more than run-up time.
 """
 from __future__ import annotations
 

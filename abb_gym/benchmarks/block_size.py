@@ -12,8 +12,8 @@ drifts by 10-25 % within minutes; bursts a fraction of a second apart see the sa
 so the ratio of two sizes' burst times is steadier than any whole-process comparison.
 Printed per size: the median and best env-steps per second; per size after the first: the
 median and quartiles of the burst-time ratio (first size / this size: above 1, this size is
-faster).  This is how :data:`~abb_gym.physics.batch.MAX_LANES` was chosen (README,
-"Integrators: speed against accuracy").
+faster).  This is how :data:`~abb_gym.physics.batch.MAX_LANES` was chosen (its comment says
+why).
 """
 from __future__ import annotations
 

@@ -49,8 +49,8 @@ def make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4",
 
 
 #: below this ratio of specialised to general vector-env speed the specialised kernel is not
-#: in effect (it measured 2.5-2.6x on yoshida_odd; 1.0x while the literal ball count and
-#: effects were lost on the way to the equations, 2026-11-23/24)
+#: in effect (it measures several times the general kernel's speed on yoshida_odd, and 1.0x
+#: when the literal ball count and effects are lost on the way to the equations: CHANGELOG.md)
 SPECIALISATION_FLOOR = 1.5
 
 
@@ -233,8 +233,7 @@ def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
                "value": f"{etd['rate']:,.0f} env-steps/s", "target": "-",
                "note": f"etdrk4/rk4 = {etd['rate'] / vec[1024]['rate']:.2f}x at its default "
                        f"step; less accurate than rk4's default step but within 1 % / 1 deg "
-                       f"on {SCENE} (README, 'Accuracy of the default steps'; not on "
-                       f"lu_hung_odd3)"}
+                       f"on {SCENE} (tests/test_bad_input.py; not on lu_hung_odd3)"}
         vec32 = vector_rate(1024, steps[1024], "specialised", repeats=repeats,
                                precision="float32")
         bar.update()

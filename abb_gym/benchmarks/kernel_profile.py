@@ -18,8 +18,8 @@ share of all samples (both threads) by library and by function.  Compiled functi
 compiler inlined into their callers count as their callers.
 
 Needs ``perf`` on the PATH and permission to attach (``kernel.perf_event_paranoid`` <= 2
-for a child process of one's own).  A profile of 2026-11-24 at 1024 sub-environments, both
-precisions: README, "Integrators: speed against accuracy".
+for a child process of one's own).  docs/performance.md says where the vector step's time
+goes, and how to read a profile.
 """
 from __future__ import annotations
 

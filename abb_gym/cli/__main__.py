@@ -2,4 +2,6 @@ import sys
 
 from . import main
 
-sys.exit(main())
+# guarded, so that importing the module (the API reference does) does not run the command line
+if __name__ == "__main__":
+    sys.exit(main())

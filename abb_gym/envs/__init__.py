@@ -3,14 +3,14 @@
 Every id is a row of the task registry (:mod:`abb_gym.envs.tasks`), which the environments,
 the tools and the documentation read:
 
-==============================  ====================  ==========================================
-id                              action                module
-==============================  ====================  ==========================================
-``abb_gym/RunUpTorque-v0``      motor torque          :mod:`abb_gym.envs.torque`
-``abb_gym/RunUpSpeed-v0``       rotor acceleration    :mod:`abb_gym.envs.speed`
-``abb_gym/DwellProfile-v0``     dwell parameters      :mod:`abb_gym.envs.dwell`
-``abb_gym/SpinRedistribute-v0`` rotor acceleration    :mod:`abb_gym.envs.spin`
-==============================  ====================  ==========================================
+==================================  ====================  ==========================================
+id                                  action                module
+==================================  ====================  ==========================================
+``abb_gym/RunUpTorque-v0``          motor torque          :mod:`abb_gym.envs.torque`
+``abb_gym/RunUpSpeed-v0``           rotor acceleration    :mod:`abb_gym.envs.speed`
+``abb_gym/DwellProfile-v0``         dwell parameters      :mod:`abb_gym.envs.dwell`
+``abb_gym/SpinRedistribute-v0``     rotor acceleration    :mod:`abb_gym.envs.spin`
+==================================  ====================  ==========================================
 
 Each id has a native vector environment (:mod:`abb_gym.envs.vector`)::
 

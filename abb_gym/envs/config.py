@@ -3,18 +3,18 @@
 A preset fixes everything about an environment except the machine (the scene) and the
 action type.  Presets shipped in ``configs/envs/``:
 
-=========  ================================================================================
-preset     use
-=========  ================================================================================
-train      default; randomised imbalance (inside the balancing capacity), phase, ball
-           positions, race drag and rolling resistance
-test       evaluation; wider ranges, imbalance up to 1.3 x the balancing capacity
-nominal    no randomisation: the scene exactly as loaded (reproduces ``simulate``)
-varied     machines that differ in what decides the best run-up, unobserved: critical speed
-           +-30 % (load mass), imbalance, ball drag, rolling resistance, support damping;
-           the synchronous vibration is observed (``configs/envs/varied.yaml`` says why)
+===========  ================================================================================
+preset       use
+===========  ================================================================================
+train        default; randomised imbalance (inside the balancing capacity), phase, ball
+             positions, race drag and rolling resistance
+test         evaluation; wider ranges, imbalance up to 1.3 x the balancing capacity
+nominal      no randomisation: the scene exactly as loaded (reproduces ``simulate``)
+varied       machines that differ in what decides the best run-up, unobserved: critical speed
+             +-30 % (load mass), imbalance, ball drag, rolling resistance, support damping;
+             the synchronous vibration is observed (``configs/envs/varied.yaml`` says why)
 varied_test  held-out evaluation of ``varied``: wider ranges, imbalance beyond the capacity
-=========  ================================================================================
+===========  ================================================================================
 
 Fields (declared once on :class:`EnvConfig` and its sections; ``null`` where a
 scene-derived default exists):
@@ -43,7 +43,7 @@ observation (every later entry moves up by one).  The episode's time limit still
 the observation is then not Markov near the end of an episode: a policy cannot tie its action
 to the clock (the clocked RunUpTorque agents learnt "late means behind" from it), but it
 cannot foresee the truncation penalty either (a clock-less RunUpTorque agent learnt to stay
-at rest: ``agents/README.md``).
+at rest: docs/what-was-tried.md).
 
 **Frame stack.**  ``frame_stack: k`` (> 1) returns the last k observations, oldest first,
 concatenated into one flat ``Box`` of ``k x obs_dim`` (a policy with memory that SB3's

@@ -17,8 +17,7 @@ vector environment, blocks in parallel with ``numba.prange``).  For each block:
    (:func:`_observe`; also for a row whose episode had ended, which only observes).
 
 The per-row functions are inlined into the block step (``inline="always"``): called, each
-took ten arrays, nine or more machine words apiece, per lane and step (README, "The rows'
-bookkeeping inlined into the block step").
+would take ten arrays, nine or more machine words apiece, per lane and step.
 
 A row gets the same arithmetic whichever block and lane it lands in, so a sub-environment of
 the vector environment and a single environment agree bit for bit.
@@ -498,9 +497,8 @@ def pack_step_arrays(*arrays):
 # The two wrappers pass the arrays one by one, never as star arguments
 # (``_step_serial(*fields_of(a), nb, spec)``): numba types a star call's arguments as
 # one tuple, which turns the literal ``nb`` and ``spec`` into plain integers, so every callee
-# compiles as the general kernel while the entry point still counts as specialised.  Written
-# that way from 2026-11-23 to 2026-11-24, the environments ran at the general kernel's speed
-# (the vector environment 330,000 instead of 822,000 env-steps/s at 1024);
+# compiles as the general kernel while the entry point still counts as specialised, and the
+# environments run at the general kernel's speed (CHANGELOG.md, Fixed);
 # ``tests/test_kernel_packing.py`` checks the order of the arrays and that no compiled call
 # passes a literal argument beside star arguments.
 @njit(cache=True, error_model="numpy")

@@ -53,8 +53,8 @@ class StepRows(NamedTuple):
 
 
 def read_step(out: np.ndarray) -> StepRows:
-    """The flags, reward and reward terms of every row of ``out`` (rows x ``layout`` O_
-    columns) after a step: ``done`` = terminated or truncated; ``reward`` and ``terms`` are
+    """The flags, reward and reward terms of every row of ``out`` (rows x ``layout``
+    ``O_*`` columns) after a step: ``done`` = terminated or truncated; ``reward`` and ``terms`` are
     rows of one new array, the flags of another."""
     flags, values, any_done, any_failed = _read_step(out)
     return StepRows(flags[0], flags[1], flags[2], values[0], values[1:], any_done, any_failed)

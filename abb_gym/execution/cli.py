@@ -15,14 +15,18 @@ Usage in a subcommand module (see :mod:`abb_gym.cli.stability`)::
 
 Options added (one argument group, "execution"):
 
-``--workers N``        local worker processes (default: all cores); with Ray, at most N tasks
-                       at once (and the CPUs of a local instance)
-``--ray``              run on a new local Ray instance (or the one ``RAY_ADDRESS`` names)
-``--ray-address ADDR`` run on an existing Ray cluster (``auto``, ``HOST:6379``,
-                       ``ray://HOST:10001``); implies ``--ray``
-``--resume-dir DIR``   keep finished results in DIR; rerunning with the same DIR resumes
-``--retries N``        reruns of a failed task before the command fails (default 2); a task
-                       raising ValueError or TypeError (bad input) is never rerun
+======================  =========================================================================
+option                  meaning
+======================  =========================================================================
+``--workers N``         local worker processes (default: all cores); with Ray, at most N tasks
+                        at once (and the CPUs of a local instance)
+``--ray``               run on a new local Ray instance (or the one ``RAY_ADDRESS`` names)
+``--ray-address ADDR``  run on an existing Ray cluster (``auto``, ``HOST:6379``,
+                        ``ray://HOST:10001``); implies ``--ray``
+``--resume-dir DIR``    keep finished results in DIR; rerunning with the same DIR resumes
+``--retries N``         reruns of a failed task before the command fails (default 2); a task
+                        raising ValueError or TypeError (bad input) is never rerun
+======================  =========================================================================
 """
 from __future__ import annotations
 

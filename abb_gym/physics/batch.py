@@ -112,8 +112,9 @@ N_G = 10
 #: and its constants), which a block of 128 lanes spreads over twice the lanes of one of 64:
 #: per lane 21 against 27 ns in float64, 10 against 15 ns in float32 on ``yoshida_odd``
 #: (``python -m abb_gym.benchmarks.rhs_cost``).  In the vector environment at 1024
-#: sub-environments 256 lanes per block gained nothing over 128 (``python -m
-#: abb_gym.benchmarks.block_size``; the README's "Blocks of 128 lanes" gives the figures).
+#: sub-environments 256 lanes per block gained nothing over 128, and lost with the varied
+#: preset, whose lanes take steps of different sizes (``python -m
+#: abb_gym.benchmarks.block_size`` measures block sizes side by side).
 #: A row's arithmetic does not depend on its block's size (``tests/test_envs_batch.py``).
 MAX_LANES = 128
 TWO_PI = 2.0 * math.pi

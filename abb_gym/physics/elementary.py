@@ -17,9 +17,9 @@ Accuracy against the C library (``tests/test_elementary.py`` measures it):
 =====================  ============================  ==========================================
 function               arguments                     error
 =====================  ============================  ==========================================
-:func:`sincos`         ``|x| <= 1.6e6`` rad           <= 2 ulp of the result, or 2 ulp of 1 near
+:func:`sincos`         ``|x| <= 1.6e6`` rad          <= 2 ulp of the result, or 2 ulp of 1 near
                                                      a zero of the function (absolute 4.5e-16)
-:func:`exp_bounded`    ``[-708, 709]``                <= 2 ulp
+:func:`exp_bounded`    ``[-708, 709]``               <= 2 ulp
 :func:`tanh`           all finite                    <= 6 ulp relative
 =====================  ============================  ==========================================
 
@@ -35,15 +35,12 @@ wide: numba code compiled afterwards in the same process sees them too):
   next pass's chain before this one ends, so one vector at a time leaves the arithmetic units
   waiting on latencies; LLVM's own choice for a loop body this large is one.  The lanes' results
   are the same bits (each lane does the same operations; no loop here sums across lanes).
-  Measured on ``yoshida_odd``: the right-hand side at 128 lanes 21.3 -> 18.9 ns per lane in
-  float64 (three alternated processes each), 10.0 -> 11.3 ns in float32 (slower: a pass
-  holds 32 float32 lanes, and more of them spill); the vector environment at 1024
-  sub-environments, where every lane loop of the step gains, in five alternated
-  whole-process pairs: float64 x1.06-1.36 (median 1.10), float32 x0.99-1.10 (median 1.08).
+  The vector environment gains with it in float64 and float32, although the right-hand side
+  alone is slower in float32 (a pass holds 32 float32 lanes, and more of them spill);
+  ``python -m abb_gym.benchmarks.rhs_cost`` and ``abb-gym bench speed`` measure both.
   In one-lane code the loop over the ten state rows is the one that vectorises, and two
   vectors of 8 rows do not fit in 10: the step functions give one-lane blocks a constant row
-  count (:func:`abb_gym.physics.model.rows_of`), which LLVM unrolls instead (README, "Two
-  vectors of lanes per pass").
+  count (:func:`abb_gym.physics.model.rows_of`), which LLVM unrolls instead.
 
 The lane loops read and write many arrays; they are compiled with the
 promise that those do not overlap (``noalias``: :mod:`abb_gym._numba`), so LLVM needs no

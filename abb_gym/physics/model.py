@@ -47,8 +47,8 @@ Decisions recorded here:
 * Rolling resistance (Yoshida eq. 2-8, Spannan eq. 5.14): a torque of the normal force N_i about
   an offset beta_b on the ball spin, i.e. a generalised force
   ``Q_roll,i = -(beta_b / r_i) R N_i sgn(ph_i')`` with the race normal force
-  ``N_i = m_i [R (th'+ph_i')^2 + E th'^2 cos(gam-ph_i) + E th'' sin(gam-ph_i)
-               - x'' cos(th+ph_i) - y'' sin(th+ph_i)]``
+  ``N_i = m_i [R (th'+ph_i')^2 + E th'^2 cos(gam-ph_i) + E th'' sin(gam-ph_i) -
+  x'' cos(th+ph_i) - y'' sin(th+ph_i)]``
   (the inward acceleration of the ball centre; with E = 0 it is Yoshida's bracket).  Its
   acceleration terms enter the left-hand side, which makes that part of the matrix
   non-symmetric; it is dissipative and not part of the mass matrix.  Spannan's factor 1/1.4 in

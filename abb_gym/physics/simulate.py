@@ -108,6 +108,10 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
              max_steps: int | None = None) -> Trajectory:
     """Simulate a run of ``scene`` under ``drive`` from t = 0 to ``t_end`` [s].
 
+    Every argument is checked before any work: numbers must be real numbers (not text, None or
+    booleans) in range (t_end >= 1e-9 s; dt, output_dt, energy_tolerance > 0; rtol in
+    [1e-13, 1]; atol >= 0, one number or one per state entry; ball angles within +-1000 rad).
+
     Parameters
     ----------
     scene : Scene or scene name
@@ -138,15 +142,14 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         about 30 s of computing (RK4 with two balls: 1.8e7 steps).  The result holds at most
         :func:`max_output_samples` samples (2e6 with two balls, 160 MB).
 
-    Every argument is checked before any work: numbers must be real numbers (not text, None or
-    booleans) in range (t_end >= 1e-9 s; dt, output_dt, energy_tolerance > 0; rtol in
-    [1e-13, 1]; atol >= 0, one number or one per state entry; ball angles within +-1000 rad).
-
     Raises
     ------
-    ValueError for bad input, naming the argument and its allowed range, and for a run beyond
-    ``max_steps`` or the output bound, saying how to proceed; :class:`SimulationError` if the
-    state becomes non-finite, the adaptive step underflows, or an undamped run gains energy.
+    ValueError
+        For bad input, naming the argument and its allowed range, and for a run beyond
+        ``max_steps`` or the output bound, saying how to proceed.
+    SimulationError
+        If the state becomes non-finite, the adaptive step underflows, or an undamped run
+        gains energy.
     """
     scene = load_scene(scene) if not isinstance(scene, Scene) else scene
     if not isinstance(drive, (SpeedProfile, MotorDrive)):

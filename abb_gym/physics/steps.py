@@ -109,8 +109,9 @@ def default_step(scene: Scene, max_speed: float, method: str = "rk4", rate=None,
     support damping, a stiff motor).  Against DOP853 (rtol 1e-12) on the Yoshida ramp RK4
     takes 1.25 ms steps (0.001 % of the peak whirl, 1e-3 deg of final ball angle), ETDRK4
     3.3 ms (0.1 %, 0.05 deg), ROS2 0.21 ms (0.02 %, 0.04 deg); ``tests/test_bad_input.py``
-    checks the stated 1 % and 1 deg there and on spannan_cfrp (the README lists where it does
-    not hold: the final ball angles of lu_hung_odd3 with ETDRK4 and ROS2).  The output
+    checks the stated 1 % and 1 deg there and on spannan_cfrp.  It does not hold for the final
+    ball angles of lu_hung_odd3 with ETDRK4 and ROS2 (three balls: their balanced positions
+    form a family, so the final angles keep every error of the path).  The output
     interval also caps the step.
     """
     if critical_speed is None:

@@ -17,7 +17,7 @@ Why: to fine-tune a run at other settings (a lower learning rate, a narrower ban
 reward weights) without training the first stage again, or to continue a run.  It is not a
 cure for an unstable training: on RunUpTorque, fine-tuning the best model of a run that
 settled 77 % of its evaluation machines lost it within 100-200k steps at every setting tried
-(``agents/README.md``, "What was tried").
+(docs/what-was-tried.md).
 
 The settings are read with the rest of the config (:class:`abb_gym.rl.config.WarmStartSettings`).
 The folder is checked before any training (:func:`abb_gym.rl.agent_files.check_folder`: the
