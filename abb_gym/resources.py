@@ -10,17 +10,16 @@ Two kinds of folder are searched, user folders first:
   wheel installs as package data of ``abb_gym._shipped`` (found with ``importlib.resources``),
   so an installed package has every scene, preset, tuned baseline and agent a checkout has.
 
-==============  =====================================  ========================================
+==============  =====================================  =====================================
 kind            file                                   what
-==============  =====================================  ========================================
+==============  =====================================  =====================================
 ``scenes``      ``scenes/<name>.yaml``                 machines (:func:`abb_gym.load_scene`)
 ``envs``        ``envs/<name>.yaml``                   environment presets
 ``baselines``   ``baselines/<scene>.yaml``             tuned baseline parameters
 ``ppo``         ``ppo/<name>.yml``                     PPO training configurations
 ``spring_rod``  ``spring_rod/<name>.yaml``             spring-and-rod balancer parameters
-=======
-``agents``      ``agents/<name>/agent.yml`` (+ files)   trained agents (``ppo:NAME``)
-==============  =====================================  ========================================
+``agents``      ``agents/<name>/agent.yml`` (+ files)  trained agents (``ppo:NAME``)
+==============  =====================================  =====================================
 
 Nothing here writes: commands that produce files (``tune-baselines``, ``train``) write where
 their ``--out`` says, never into the shipped folder.

@@ -59,8 +59,8 @@ def tasks() -> list[Task]:
     preset, registered steps), in registration order."""
     import importlib
 
-    from abb_gym.envs import tasks as registry
-    return [Task(row, importlib.import_module(registry.env_class(row).__module__))
+    from abb_gym.envs import entry, tasks as registry
+    return [Task(row, importlib.import_module(entry.env_class(row).__module__))
             for row in registry.TASKS.values()]
 
 
@@ -183,7 +183,7 @@ def env_page(task: Task) -> str:
     """The page of one environment id (MyST Markdown)."""
     from abb_gym.envs.base import COMMON_DOC
     from abb_gym.envs.setup import EnvSetup
-    from abb_gym.envs.tasks import env_class, vector_class
+    from abb_gym.envs.entry import env_class, vector_class
     row = task.row
     scene, preset = row.default_scene, row.default_preset
     lead, own = sections(task.module.__doc__)
