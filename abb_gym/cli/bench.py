@@ -22,6 +22,8 @@ def register(sub) -> None:
     spd = bsub.add_parser("speed", help="throughput of simulate, gym.make and the vector env")
     spd.add_argument("--out", default="out/bench", help="folder for the Markdown table")
     spd.add_argument("--quick", action="store_true", help="shorter measurements (smoke test)")
+    spd.add_argument("--docs", default=None, metavar="PATH",
+                     help="also write the performance page there (docs/performance.md)")
     spd.set_defaults(func=run_speed)
 
 
@@ -74,4 +76,12 @@ def run_speed(args) -> int:
         sys.stdout.flush()
     (out / "speed.md").write_text(markdown_table(rows, COLUMNS) + "\n")
     print(f"wrote {out / 'speed.md'}")
+    from ..benchmarks.env_cost import performance_page
+    page = performance_page(rows, COLUMNS)
+    (out / "performance.md").write_text(page)
+    print(f"wrote {out / 'performance.md'}")
+    if args.docs:
+        Path(args.docs).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.docs).write_text(page)
+        print(f"wrote {args.docs}")
     return 0
