@@ -135,3 +135,28 @@ def test_the_reach_angle_bounds_every_pair():
     pen, _, _ = contact.pair_geometry.py_func(0.0, theta * (1 - 1e-5), big_r, 2 * max(radii))
     assert pen > 0.0
     assert contact.neighbour_reach_angle((0.02,), big_r) == math.pi
+
+
+@njit
+def _rates(s, p, b, nb, reach):
+    L = s.shape[1]
+    out = np.zeros((nb, L))
+    for l in range(L):
+        for i in range(nb):
+            out[i, l] = contact.contact_rate_lane(s, l, i, b, mdl.B_RADIUS, mdl.B_MEFF,
+                                                  p[mdl.P_R, l], p[mdl.P_KC, l],
+                                                  p[mdl.P_ZC, l], reach)
+    return out
+
+
+def test_the_contact_rates_of_the_step_rule_ask_the_neighbours_for_the_same_bits():
+    scene = load_scene("washer")
+    rng = np.random.default_rng(9)
+    angles, speeds = _clustered(scene, rng, 200, squeeze=0.3)
+    angles[:30] = np.sort(rng.uniform(-3, 3, (30, 12)))[:, ::-1]  # not in race order
+    angles[30:40] = 0.0  # the step rule's state: every ball at one place
+    s, p, b = _lanes(scene, angles, speeds)
+    neighbours = _rates(s, p, b, 12, p[mdl.P_REACH, 0])
+    every = _rates(s, p, b, 12, -1.0)
+    assert np.count_nonzero(every[:, 40:]) > 0.5 * every[:, 40:].size
+    assert np.array_equal(neighbours, every)

@@ -152,8 +152,18 @@ def contact_energy(q, b, col_r, big_r, k):
     return e
 
 
+@njit(cache=True, inline="always")
+def _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k):
+    """k (1/m_i + 1/m_j) [1/s^2] of the pair (i, j) of lane ``l`` if it touches, else 0."""
+    pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
+                                    b[i, col_r, l] + b[j, col_r, l])
+    if pen > 0.0:
+        return k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
+    return 0.0
+
+
 @njit(cache=True)
-def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
+def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta, reach_angle=-1.0):
     """Bound on the contact eigenvalue magnitude of ball i of lane ``l`` [1/s] (0 if it
     touches nothing).
 
@@ -161,15 +171,27 @@ def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
     two largest terms only: in a ring a ball has one neighbour on each side, and the state at
     which the step rule asks (all balls at ph = 0, :func:`abb_gym.physics.simulate.stiff_rate`)
     would otherwise count every ball.  Overdamped contacts (zeta > 1/2) have a fast real root
-    up to 2 zeta omega."""
+    up to 2 zeta omega.
+
+    With ``reach_angle`` (:func:`neighbour_reach_angle`) and four or more balls, only the
+    balls of adjacent index are asked where :func:`ring_holds` says that no other ball can
+    touch (the neighbour list of :func:`abb_gym.physics.model._contacts`): the same two
+    terms, so the same bits, as asking every ball."""
+    n = b.shape[0]
     first = 0.0
     second = 0.0
-    for j in range(b.shape[0]):
-        if j != i:
-            pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
-                                            b[i, col_r, l] + b[j, col_r, l])
-            if pen > 0.0:
-                w2 = k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
+    if reach_angle >= 0.0 and n >= 4 and ring_holds(s, l, n, reach_angle):
+        for j in (n - 1 if i == 0 else i - 1, 0 if i == n - 1 else i + 1):
+            w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
+            if w2 > first:
+                second = first
+                first = w2
+            elif w2 > second:
+                second = w2
+    else:
+        for j in range(n):
+            if j != i:
+                w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
                 if w2 > first:
                     second = first
                     first = w2

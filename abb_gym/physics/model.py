@@ -892,8 +892,9 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                         big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
             lam[nq + 3 + i, l] = rate / b[i, B_II, l]
             if ext and p[P_KC, l] != 0.0:
-                lam[nq + 3 + i, l] += _contact.contact_rate_lane(s, l, i, b, B_RADIUS, B_MEFF,
-                                                                 big_r, p[P_KC, l], p[P_ZC, l])
+                lam[nq + 3 + i, l] += _contact.contact_rate_lane(
+                    s, l, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l], p[P_ZC, l],
+                    p[P_REACH, l])
 
 
 @njit(cache=True, error_model="numpy")
