@@ -19,6 +19,12 @@ lane: the same code.
 * :func:`run_batch` - ``integrators.run`` for ``N`` environments (own parameters, own drive
   tables, shared output times), parallel over blocks with ``numba.prange``.
 
+**Threads.**  A batch of at most :data:`MAX_LANES` environments is one block and runs on one
+thread (:func:`lanes_per_block`); larger batches run their blocks in parallel on as many
+threads as other processes leave CPUs free (:func:`parallel_threads`, :class:`ParallelCall`,
+:class:`abb_gym._threads.FreeCpus`), so that a busy machine never makes the default slower
+than one thread.  Neither the block shape nor the thread count changes a result.
+
 Lanes of a block run until the block's slowest lane is done, so a block works as long as its
 largest step count: callers that mix step sizes group lanes of similar step size into the
 same block (``order``, below; :func:`lane_order`).
