@@ -144,3 +144,22 @@ def test_the_speed_table_warns_when_the_specialised_kernel_is_not_in_effect():
     assert lost.startswith("specialised/general = 1.01x - WARNING") and "may not be in effect" in lost
     assert "WARNING" in specialisation_note(SPECIALISATION_FLOOR * 0.99, 1.0)
     assert "WARNING" not in specialisation_note(SPECIALISATION_FLOOR, 1.0)
+
+
+def test_bench_speed_costs_only_runs_the_side_by_side_tables_alone(tmp_path, monkeypatch):
+    from abb_gym.benchmarks import env_cost, speed
+    from abb_gym.cli import main
+
+    def cost_rows(quick=False):
+        env_cost.LAST_TABLES["washer"] = [{"num_envs": 4, "ratio": 3.0}]
+        yield {"measurement": "washer", "value": "3x", "target": "<= 10x", "note": "-"}
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("not a cost table")
+
+    monkeypatch.setattr(env_cost, "speed_rows", cost_rows)
+    monkeypatch.setattr(speed, "runup_wall_time", refuse)
+    assert main(["bench", "speed", "--costs-only", "--out", str(tmp_path)]) == 0
+    rows = (tmp_path / "speed.md").read_text().splitlines()
+    assert len(rows) == 3 and rows[2].startswith("| washer ")
+    assert "## Washer against yoshida_odd" in (tmp_path / "performance.md").read_text()

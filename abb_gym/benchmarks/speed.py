@@ -138,8 +138,13 @@ def stepping_rates(quick: bool = False) -> tuple[list[dict], float]:
 COLUMNS = ("measurement", "value", "target", "note")
 
 
-def iter_speed(quick: bool = False) -> Iterator[dict]:
-    """Every row of the benchmark, each as soon as it is measured."""
+def iter_speed(quick: bool = False, costs_only: bool = False) -> Iterator[dict]:
+    """Every row of the benchmark, each as soon as it is measured (``costs_only``: the rows
+    of :mod:`abb_gym.benchmarks.env_cost` alone)."""
+    if costs_only:
+        from . import env_cost
+        yield from env_cost.speed_rows(quick=quick)
+        return
     yield from runup_wall_time(5 if quick else 20)
     step_rows, scipy_rate = stepping_rates(quick)
     yield from step_rows

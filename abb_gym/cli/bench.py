@@ -22,6 +22,8 @@ def register(sub) -> None:
     spd = bsub.add_parser("speed", help="throughput of simulate, gym.make and the vector env")
     spd.add_argument("--out", default="out/bench", help="folder for the Markdown table")
     spd.add_argument("--quick", action="store_true", help="shorter measurements (smoke test)")
+    spd.add_argument("--costs-only", action="store_true",
+                     help="only the side-by-side CPU-time tables (benchmarks.env_cost)")
     spd.add_argument("--docs", default=None, metavar="PATH",
                      help="also write the performance page there (docs/performance.md)")
     spd.set_defaults(func=run_speed)
@@ -67,7 +69,7 @@ def run_speed(args) -> int:
     rows: list[dict] = []
 
     def measured():
-        for row in iter_speed(quick=args.quick):
+        for row in iter_speed(quick=args.quick, costs_only=args.costs_only):
             rows.append(row)
             yield row
 
