@@ -56,30 +56,20 @@ def split_info(info: dict[str, Any], n: int, rows: Iterable[int] | None = None
 
     ``rows`` restricts the work to those sub-environments (the others get empty dicts).
     Nested dicts (``reward_terms``) are split recursively; a key is present in dict ``i`` only
-    where its mask is true.  One-dimensional arrays are read as Python lists first
-    (``tolist``: the same values as Python floats, ints and bools instead of numpy scalars),
-    which costs a fifth of indexing them element by element: the split was most of the
-    adapter's cost per step.
+    where its mask is true.
     """
+    out: list[dict[str, Any]] = [{} for _ in range(n)]
     idx = range(n) if rows is None else list(rows)
-    keys, columns, masks = [], [], []
     for key, value in info.items():
         if key.startswith("_"):
             continue
         mask = info.get("_" + key)
         if isinstance(value, dict):
-            value = split_info(value, n, rows)
-        elif isinstance(value, np.ndarray) and value.ndim == 1:
-            value = value.tolist()
-        keys.append(key)
-        columns.append(value)
-        masks.append(None if mask is None or (rows is None and mask.all()) else mask.tolist())
-    if rows is None and all(m is None for m in masks):
-        # every key in every dict: built row by row in C (dict(zip(...)))
-        return [dict(zip(keys, row)) for row in zip(*columns)] if keys else \
-            [{} for _ in range(n)]
-    out: list[dict[str, Any]] = [{} for _ in range(n)]
-    for key, value, mask in zip(keys, columns, masks):
+            sub = split_info(value, n, idx)
+            for i in idx:
+                if mask is None or mask[i]:
+                    out[i][key] = sub[i]
+            continue
         for i in idx:
             if mask is None or mask[i]:
                 out[i][key] = value[i]
@@ -165,17 +155,17 @@ class NativeVecEnv(VecEnv):
         self._actions = None
         dones = np.logical_or(terminated, truncated)
         infos = self._split(info)
-        for inf in infos:
-            inf["TimeLimit.truncated"] = False
-        if dones.any():
-            failed = info.get("_failure")
-            for i in np.flatnonzero(dones):
-                inf = infos[i]
+        failed = info.get("_failure")
+        for i, d in enumerate(dones):
+            inf = infos[i]
+            if d:
                 inf["terminal_observation"] = obs[i].copy()
                 inf["TimeLimit.truncated"] = bool(self.bootstrap_truncated and truncated[i]
                                                   and not terminated[i])
                 inf["is_success"] = bool(terminated[i] and not (failed is not None
                                                                 and failed[i]))
+            else:
+                inf["TimeLimit.truncated"] = False
         if dones.any():
             obs, rinfo = self.venv_native.reset(options={"reset_mask": dones})
             rows = np.flatnonzero(dones)
