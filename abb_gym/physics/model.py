@@ -504,8 +504,8 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
 def _lane_drive(t, s, d, l, nq, motor, envelope):
     """(th, w, alpha, torque) of lane ``l``: the rotor angle [rad], speed [rad/s] and
     acceleration [rad/s^2] (0 under a motor, where it is an unknown) and the motor torque
-    [N m] (0 under a prescribed spin).  Every pass of :func:`accelerations_block` asks again
-    rather than keeping them: a few operations, the same bits each time."""
+    [N m] (0 under a prescribed spin).  The passes of :func:`accelerations_block` ask again
+    rather than keep them: a few operations, the same bits each time."""
     x = s[0, l]
     tau = t[l] - d[dl.D_T0, l]
     if motor:
@@ -521,50 +521,56 @@ def _lane_drive(t, s, d, l, nq, motor, envelope):
     return th, w, alpha, torque
 
 
-@njit(cache=True, error_model="numpy", noalias=True)
-def _ball_pass(t, s, p, b, d, ds, fi_row, bx_row, by_row, bth_row, colx_row, coly_row, ci_row,
-               jt_row, sx_row, cy_row, fx_row, fy_row, fth_row, i, nq, spec):
-    """Pass (2) of :func:`accelerations_block` for ball ``i``, every lane: its terms
-    (:func:`_ball_terms`) into the rows of ``work[i]`` given one by one: its generalised force
-    less any prescribed ``b_th th''``, the rows of its equation and its shares of the rotor's
-    rows.  The lane's sin and cos of th + gam come from ``ds`` rows 0 and 1, the ball's
-    contact force and radial force from rows ``3 + i`` and ``nq + 3 + i``, where pass (1)
-    left them.
-
-    A function of its own, not inlined by numba, so that each output row is an argument of
-    its own under the no-alias promise (views of one array that do not overlap:
-    :mod:`abb_gym._numba`): written as thirteen rows of one array, LLVM could not tell that
-    they do not overlap, and left the lane loop scalar."""
-    L = lanes_of(s, spec)
+@njit(cache=True, inline="always")
+def _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec):
+    """Ball ``i``'s terms in lane ``l`` (:func:`_ball_terms`), its generalised force less any
+    prescribed ``b_th th''``.  The lane's sin and cos of th + gam come from ``ds`` rows 0 and
+    1, the ball's contact force and radial force from rows ``3 + i`` and ``nq + 3 + i``, where
+    :func:`accelerations_block` left them."""
     ext = (spec & SPEC_EXT) != 0
     ecc = (spec & SPEC_ECC) != 0
     roll = (spec & SPEC_ROLL) != 0
     motor = (spec & SPEC_MOTOR) != 0
     envelope = (spec & SPEC_ENVELOPE) != 0
-    for l in range(L):
-        x = s[0, l]
-        th, w, alpha, _ = _lane_drive(t, s, d, l, nq, motor, envelope)
-        w2 = w * w
-        stg = ds[0, l] if ecc else el.like(x, 0.0)
-        ctg = ds[1, l] if ecc else el.like(x, 0.0)
-        big_r = p[P_R, l]
-        grav = ext and p[P_GRAV, l] != 0.0
-        touch = ext and p[P_KC, l] != 0.0
-        fric = ext and p[P_FRIC, l] != 0.0
-        dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
-        geometry = (big_r, p[P_UREG, l], p[P_E, l], p[P_GAM, l], stg, ctg, p[P_GX, l],
-                    p[P_GY, l])
-        law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
-               p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
-        flags = (ext, ecc, roll, grav, touch, fric)
-        colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
-            th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
-            (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_BETA, l],
-             b[i, B_MUR, l]), geometry,
-            (ds[3 + i, l], ds[nq + 3 + i, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
-             b[i, B_REU, l]) + law, flags)
-        if not motor:
-            fi -= bth * alpha
+    x = s[0, l]
+    th, w, alpha, _ = _lane_drive(t, s, d, l, nq, motor, envelope)
+    w2 = w * w
+    stg = ds[0, l] if ecc else el.like(x, 0.0)
+    ctg = ds[1, l] if ecc else el.like(x, 0.0)
+    big_r = p[P_R, l]
+    grav = ext and p[P_GRAV, l] != 0.0
+    touch = ext and p[P_KC, l] != 0.0
+    fric = ext and p[P_FRIC, l] != 0.0
+    dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
+    geometry = (big_r, p[P_UREG, l], p[P_E, l], p[P_GAM, l], stg, ctg, p[P_GX, l],
+                p[P_GY, l])
+    law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
+           p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+    flags = (ext, ecc, roll, grav, touch, fric)
+    colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
+        th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
+        (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_BETA, l],
+         b[i, B_MUR, l]), geometry,
+        (ds[3 + i, l], ds[nq + 3 + i, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
+         b[i, B_REU, l]) + law, flags)
+    if not motor:
+        fi -= bth * alpha
+    return colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth
+
+
+@njit(cache=True, error_model="numpy", noalias=True)
+def _ball_pass(t, s, p, b, d, ds, fi_row, bx_row, by_row, bth_row, colx_row, coly_row, ci_row,
+               jt_row, sx_row, cy_row, fx_row, fy_row, fth_row, i, nq, spec):
+    """Ball ``i``'s terms (:func:`_lane_ball_terms`) in every lane, into the rows of
+    ``work[i]`` given one by one (the split passes of :func:`accelerations_block`).
+
+    A function of its own, not inlined by numba, so that each output row is an argument of
+    its own under the no-alias promise (views of one array that do not overlap:
+    :mod:`abb_gym._numba`): written as thirteen rows of one array, LLVM could not tell that
+    they do not overlap, and left the lane loop scalar."""
+    for l in range(lanes_of(s, spec)):
+        colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _lane_ball_terms(
+            t, s, p, b, d, ds, i, l, nq, spec)
         fi_row[l] = fi
         bx_row[l] = bx
         by_row[l] = by
@@ -578,6 +584,128 @@ def _ball_pass(t, s, p, b, d, ds, fi_row, bx_row, by_row, bth_row, colx_row, col
         fx_row[l] = fxi
         fy_row[l] = fyi
         fth_row[l] = fthi
+
+
+@njit(cache=True, inline="always")
+def _rotor_start(t, s, p, d, l, nq, motor, envelope):
+    """Lane ``l``'s rotor rows before the balls' shares: (Sx, Cy, Jt, x, y and th forces,
+    th'', the 12 sums of the Schur complement at 0) and (th, w, alpha, vx, vy)."""
+    x = s[0, l]
+    y = s[1, l]
+    vx = s[nq, l]
+    vy = s[nq + 1, l]
+    th, w, alpha, torque = _lane_drive(t, s, d, l, nq, motor, envelope)
+    w2 = w * w
+    sth, cth = el.sincos(th)
+    u0 = p[P_U0, l]
+    sx = u0 * sth
+    cy = u0 * cth
+    fx = -p[P_CX, l] * vx - p[P_KX, l] * x + u0 * cth * w2
+    fy = -p[P_CY, l] * vy - p[P_KY, l] * y + u0 * sth * w2
+    fth = torque - p[P_BETA0, l] * w
+    jt = p[P_J, l]
+    zero = el.like(x, 0.0)
+    # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
+    # (d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2)
+    schur = (zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero)
+    return (sx, cy, jt, fx, fy, fth) + schur, (th, w, alpha, vx, vy)
+
+
+@njit(cache=True, inline="always")
+def _add_ball(acc, terms, inv, motor):
+    """``acc`` (:func:`_rotor_start`) plus one ball's ``terms`` (:func:`_lane_ball_terms`)
+    with its 1 / I_i ``inv``, each sum in ball order."""
+    (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
+    colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = terms
+    sx += sxi
+    cy += cyi
+    jt += jti
+    fx += fxi
+    fy += fyi
+    fth += fthi
+    d00 += colx * bx * inv
+    d01 += colx * by * inv
+    d10 += coly * bx * inv
+    d11 += coly * by * inv
+    g0 += colx * fi * inv
+    g1 += coly * fi * inv
+    if motor:
+        d02 += colx * bth * inv
+        d12 += coly * bth * inv
+        d20 += ci * bx * inv
+        d21 += ci * by * inv
+        d22 += ci * bth * inv
+        g2 += ci * fi * inv
+    return (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2)
+
+
+@njit(cache=True, inline="always")
+def _solve_rotor(acc, lane, p, l, ext, motor):
+    """(x'', y'', th'') of lane ``l`` from its sums ``acc`` and ``lane`` (:func:`_rotor_start`):
+    gravity's rotor terms, the 2x2 (prescribed spin) or 3x3 (motor) system."""
+    (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
+    alpha = lane[2]
+    total = p[P_MASS, l]
+    if ext and p[P_GRAV, l] != 0.0:
+        gx = p[P_GX, l]
+        gy = p[P_GY, l]
+        fx += total * gx
+        fy += total * gy
+        fth += gy * cy - gx * sx
+    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] minus D
+    a00 = total - d00
+    a01 = -d01
+    a10 = -d10
+    a11 = total - d11
+    if motor:
+        a02 = -sx - d02
+        a12 = cy - d12
+        a20 = -sx - d20
+        a21 = cy - d21
+        a22 = jt - d22
+        fx -= g0
+        fy -= g1
+        fth -= g2
+        c00 = a11 * a22 - a12 * a21
+        c01 = a12 * a20 - a10 * a22
+        c02 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
+        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
+        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
+    else:
+        # the prescribed th'' moves to the right-hand side
+        fx += -sx * -alpha - g0
+        fy -= cy * alpha + g1
+        det = a00 * a11 - a01 * a10
+        ax = (fx * a11 - a01 * fy) / det
+        ay = (a00 * fy - a10 * fx) / det
+        ath = alpha
+    return ax, ay, ath
+
+
+@njit(cache=True, inline="always")
+def _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor):
+    """The derivatives of lane ``l``: the balls' from their rows of ``work`` (``W_FI`` holds
+    Q_i less the prescribed b_th th'' already), then the rotor's."""
+    for i in range(nb):
+        ds[3 + i, l] = s[nq + 3 + i, l]
+        qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
+        if motor:
+            qi -= work[i, W_BTH, l] * ath
+        ds[nq + 3 + i, l] = qi * b[i, B_INV, l]
+    ds[0, l] = lane[3]
+    ds[1, l] = lane[4]
+    ds[2, l] = s[nq + 2, l] if motor else lane[1]
+    ds[nq, l] = ax
+    ds[nq + 1, l] = ay
+    ds[nq + 2, l] = ath
+
+
+#: ball counts up to which the right-hand side is one lane loop around the ball loop (LLVM
+#: unrolls the ball loop whole and vectorises the lane loop); more balls take the split
+#: passes of :func:`accelerations_block`
+FUSED_BALLS = 3
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
@@ -597,26 +725,26 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
-    ball.  **Loop order.**  The lane loop is the innermost loop of every pass, for any ball
-    count: (1) the contact forces (:func:`_contacts`) and the race's sin and cos of th + gam,
-    into rows of ``ds`` that (3) overwrites; (2) per ball, a lane loop of that ball's terms
-    (:func:`_ball_pass`), kept in ``work``; (3) per lane, the sums over the balls in ball
-    order, the 2x2 or 3x3 solve and the derivatives.  Written as one lane loop around the ball
-    loop, the lane loop vectorised only while LLVM unrolled the ball loop whole, up to three
-    balls (``yoshida_odd``'s right-hand side at 128 lanes: 42-52 ns per lane at 2-3 balls,
-    290 at 4, 580-960 at 5-12: scalar code, the "vectorisation cliff").  Each pass reads
-    arrays that it does not write (``work`` or ``ds``, never both), so its lane loop needs no
-    overlap checks.  Each lane's operations and their order are those of the single loop,
-    so the results are the same bits."""
+    ball (:func:`_add_ball`).  **Loop order.**  First the contact forces (:func:`_contacts`)
+    and the race's sin and cos of th + gam go into rows of ``ds`` that the derivatives
+    overwrite last.  Up to :data:`FUSED_BALLS` balls, one lane loop then does the rest, the
+    ball loop inside it, which LLVM unrolls whole, so that the lane loop vectorises.  With
+    more balls LLVM unrolled it no longer, and the lane loop stayed scalar (``yoshida_odd``'s
+    right-hand side at 128 lanes: 42-52 ns per lane at 2-3 balls, 290 at 4, 580-960 at 5-12:
+    the "vectorisation cliff"); those take split passes, each a lane loop: per ball its terms
+    (:func:`_ball_pass`, kept in ``work``), then per lane the sums in ball order, the solve
+    and the derivatives.  Each pass reads arrays that it does not write, so its lane loop
+    needs no overlap checks.  The split passes cost two balls 15 % more (the terms go through
+    memory), hence the fused loop where it vectorises.  Each lane's operations and their
+    order are the same either way, so the results are the same bits."""
     L = lanes_of(s, spec)
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
     ecc = (spec & SPEC_ECC) != 0
     motor = (spec & SPEC_MOTOR) != 0
     envelope = (spec & SPEC_ENVELOPE) != 0
-    # (1) pair forces first, into the balls' rows of ds (free until (3) writes them): the
-    # contact's radial part loads the race (friction, rolling); and the race's sin and cos of
-    # th + gam into ds rows 0 and 1
+    # pair forces first, into the balls' rows of ds: the contact's radial part loads the race
+    # (friction, rolling); and the race's sin and cos of th + gam into ds rows 0 and 1
     if ext:
         _contacts(s, p, b, ds, work, nb, nq, L)
     if ecc:
@@ -625,120 +753,34 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
             stg, ctg = el.sincos(th + p[P_GAM, l])
             ds[0, l] = stg
             ds[1, l] = ctg
-    # (2) each ball's terms, lane by lane
+    if nb <= FUSED_BALLS:
+        for l in range(L):
+            acc, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
+            for i in range(nb):
+                terms = _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec)
+                work[i, W_FI, l] = terms[9]
+                work[i, W_BX, l] = terms[10]
+                work[i, W_BY, l] = terms[11]
+                work[i, W_BTH, l] = terms[12]
+                acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
+            ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+            _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
+        return
     for i in range(nb):
         wi = work[i]
         _ball_pass(t, s, p, b, d, ds, wi[W_FI], wi[W_BX], wi[W_BY], wi[W_BTH], wi[W_COLX],
                    wi[W_COLY], wi[W_CI], wi[W_JT], wi[W_SX], wi[W_CY], wi[W_FX], wi[W_FY],
                    wi[W_FTH], i, nq, spec)
-    # (3) the rotor's rows: sums over the balls, the solve
     for l in range(L):
-        x = s[0, l]
-        y = s[1, l]
-        vx = s[nq, l]
-        vy = s[nq + 1, l]
-        th, w, alpha, torque = _lane_drive(t, s, d, l, nq, motor, envelope)
-        grav = ext and p[P_GRAV, l] != 0.0
-        gx = p[P_GX, l]
-        gy = p[P_GY, l]
-        w2 = w * w
-        sth, cth = el.sincos(th)
-        total = p[P_MASS, l]
-        u0 = p[P_U0, l]
-        sx = u0 * sth
-        cy = u0 * cth
-        fx = -p[P_CX, l] * vx - p[P_KX, l] * x + u0 * cth * w2
-        fy = -p[P_CY, l] * vy - p[P_KY, l] * y + u0 * sth * w2
-        fth = torque - p[P_BETA0, l] * w
-        jt = p[P_J, l]
-        # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
-        zero = el.like(x, 0.0)
-        d00 = zero
-        d01 = zero
-        d10 = zero
-        d11 = zero
-        d02 = zero
-        d12 = zero
-        d20 = zero
-        d21 = zero
-        d22 = zero
-        g0 = zero
-        g1 = zero
-        g2 = zero
+        acc, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
         for i in range(nb):
-            colx = work[i, W_COLX, l]
-            coly = work[i, W_COLY, l]
-            fi = work[i, W_FI, l]
-            bx = work[i, W_BX, l]
-            by = work[i, W_BY, l]
-            sx += work[i, W_SX, l]
-            cy += work[i, W_CY, l]
-            jt += work[i, W_JT, l]
-            fx += work[i, W_FX, l]
-            fy += work[i, W_FY, l]
-            fth += work[i, W_FTH, l]
-            inv = b[i, B_INV, l]
-            d00 += colx * bx * inv
-            d01 += colx * by * inv
-            d10 += coly * bx * inv
-            d11 += coly * by * inv
-            g0 += colx * fi * inv
-            g1 += coly * fi * inv
-            if motor:
-                bth = work[i, W_BTH, l]
-                ci = work[i, W_CI, l]
-                d02 += colx * bth * inv
-                d12 += coly * bth * inv
-                d20 += ci * bx * inv
-                d21 += ci * by * inv
-                d22 += ci * bth * inv
-                g2 += ci * fi * inv
-        if grav:
-            fx += total * gx
-            fy += total * gy
-            fth += gy * cy - gx * sx
-        # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] minus D
-        a00 = total - d00
-        a01 = -d01
-        a10 = -d10
-        a11 = total - d11
-        if motor:
-            a02 = -sx - d02
-            a12 = cy - d12
-            a20 = -sx - d20
-            a21 = cy - d21
-            a22 = jt - d22
-            fx -= g0
-            fy -= g1
-            fth -= g2
-            c00 = a11 * a22 - a12 * a21
-            c01 = a12 * a20 - a10 * a22
-            c02 = a10 * a21 - a11 * a20
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
-            ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
-            ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
-        else:
-            # the prescribed th'' moves to the right-hand side
-            fx += -sx * -alpha - g0
-            fy -= cy * alpha + g1
-            det = a00 * a11 - a01 * a10
-            ax = (fx * a11 - a01 * fy) / det
-            ay = (a00 * fy - a10 * fx) / det
-            ath = alpha
-        for i in range(nb):
-            ds[3 + i, l] = s[nq + 3 + i, l]
-            # W_FI holds Q_i less the prescribed b_th th'' already
-            qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
-            if motor:
-                qi -= work[i, W_BTH, l] * ath
-            ds[nq + 3 + i, l] = qi * b[i, B_INV, l]
-        ds[0, l] = vx
-        ds[1, l] = vy
-        ds[2, l] = s[nq + 2, l] if motor else w
-        ds[nq, l] = ax
-        ds[nq + 1, l] = ay
-        ds[nq + 2, l] = ath
+            terms = (work[i, W_COLX, l], work[i, W_COLY, l], work[i, W_CI, l],
+                     work[i, W_JT, l], work[i, W_SX, l], work[i, W_CY, l], work[i, W_FX, l],
+                     work[i, W_FY, l], work[i, W_FTH, l], work[i, W_FI, l], work[i, W_BX, l],
+                     work[i, W_BY, l], work[i, W_BTH, l])
+            acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
+        ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+        _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
 
 
 def spec_of(p: np.ndarray, d: np.ndarray) -> int:
