@@ -704,8 +704,10 @@ def _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor):
 
 #: ball counts up to which the right-hand side is one lane loop around the ball loop (LLVM
 #: unrolls the ball loop whole and vectorises the lane loop); more balls take the split
-#: passes of :func:`accelerations_block`
-FUSED_BALLS = 3
+#: passes of :func:`accelerations_block`.  At 3 balls the split passes were faster (the
+#: right-hand side at 128 lanes, CPU time: 122 ns per lane fused, against 79 ns for 5 balls
+#: split)
+FUSED_BALLS = 2
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
@@ -731,7 +733,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     ball loop inside it, which LLVM unrolls whole, so that the lane loop vectorises.  With
     more balls LLVM unrolled it no longer, and the lane loop stayed scalar (``yoshida_odd``'s
     right-hand side at 128 lanes: 42-52 ns per lane at 2-3 balls, 290 at 4, 580-960 at 5-12:
-    the "vectorisation cliff"); those take split passes, each a lane loop: per ball its terms
+    the "vectorisation cliff"); they take split passes, each a lane loop: per ball its terms
     (:func:`_ball_pass`, kept in ``work``), then per lane the sums in ball order, the solve
     and the derivatives.  Each pass reads arrays that it does not write, so its lane loop
     needs no overlap checks.  The split passes cost two balls 15 % more (the terms go through
