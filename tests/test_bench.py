@@ -67,7 +67,7 @@ def test_energy_drift_runs_every_integrator():
 def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys, monkeypatch):
     """Every measurement is replaced by an instant stand-in that notes how many table rows
     stdout already shows when it starts: each must see the rows of all earlier ones."""
-    from abb_gym.benchmarks import effects, env_speed, speed
+    from abb_gym.benchmarks import effects, env_cost, env_speed, speed
     from abb_gym.cli import main
     stdout: list[str] = []
     seen: list[tuple[str, int]] = []
@@ -110,8 +110,15 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     monkeypatch.setattr(env_speed, "cold_start", stand_in("cold", {
         "python": 0.01, "import": 0.1, "help": 0.1, "first_step_cached": 1.0}))
     monkeypatch.setattr(env_speed, "_vector_memory", stand_in("memory", 10.0))
+    def cost_rows(quick=False):
+        seen.append(("cost", rows_printed()))
+        env_cost.LAST_TABLES["batch"] = [{"num_envs": 8, "default_over_one": 1.0}]
+        yield {"measurement": "per core", "value": "1x", "target": "-", "note": "-"}
+
     monkeypatch.setattr(effects, "iter_speed_rows", effect_rows)
-    assert main(["bench", "speed", "--quick", "--out", str(tmp_path)]) == 0
+    monkeypatch.setattr(env_cost, "speed_rows", cost_rows)
+    docs = tmp_path / "docs" / "performance.md"
+    assert main(["bench", "speed", "--quick", "--out", str(tmp_path), "--docs", str(docs)]) == 0
     total = rows_printed()
     # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
     # general kernel, ETDRK4, float32, the batch simulation and its float32 row, then
@@ -120,11 +127,14 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
                     ("vector", 4), ("vector", 5), ("vector", 6), ("vector", 7),
                     ("vector", 8), ("vector", 9), ("batch", 10), ("batch", 11),
                     ("single", 12), ("cartpole", 12), ("cold", 15), ("memory", 17),
-                    ("effects", 18)]
-    assert total == 19
+                    ("effects", 18), ("cost", 19)]
+    assert total == 20
     assert [kw.get("integrator", "rk4") for kw in vector_calls].count("etdrk4") == 1
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")
+    page = docs.read_text()
+    assert page == (tmp_path / "performance.md").read_text()
+    assert "| per core " in page and "## Batch size" in page and "| 8 " in page
 
 
 def test_the_speed_table_warns_when_the_specialised_kernel_is_not_in_effect():
@@ -134,3 +144,22 @@ def test_the_speed_table_warns_when_the_specialised_kernel_is_not_in_effect():
     assert lost.startswith("specialised/general = 1.01x - WARNING") and "may not be in effect" in lost
     assert "WARNING" in specialisation_note(SPECIALISATION_FLOOR * 0.99, 1.0)
     assert "WARNING" not in specialisation_note(SPECIALISATION_FLOOR, 1.0)
+
+
+def test_bench_speed_costs_only_runs_the_side_by_side_tables_alone(tmp_path, monkeypatch):
+    from abb_gym.benchmarks import env_cost, speed
+    from abb_gym.cli import main
+
+    def cost_rows(quick=False):
+        env_cost.LAST_TABLES["washer"] = [{"num_envs": 4, "ratio": 3.0}]
+        yield {"measurement": "washer", "value": "3x", "target": "<= 10x", "note": "-"}
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("not a cost table")
+
+    monkeypatch.setattr(env_cost, "speed_rows", cost_rows)
+    monkeypatch.setattr(speed, "runup_wall_time", refuse)
+    assert main(["bench", "speed", "--costs-only", "--out", str(tmp_path)]) == 0
+    rows = (tmp_path / "speed.md").read_text().splitlines()
+    assert len(rows) == 3 and rows[2].startswith("| washer ")
+    assert "## Washer against yoshida_odd" in (tmp_path / "performance.md").read_text()

@@ -18,10 +18,9 @@ def test_each_environment_gets_its_block_size_and_the_default_comes_back():
 
 
 def test_a_size_the_environment_cannot_fill_is_reported_as_what_it_got():
-    # 32 sub-environments on 2 cores: at most 16 lanes per block (two blocks per core),
-    # whatever is allowed
+    # 32 sub-environments: at most 32 lanes per block (one block), whatever is allowed
     rows = bs.block_size_rates(num_envs=32, lanes=(8, 64), rounds=2)
-    assert [(r["requested"], r["lanes"]) for r in rows] == [(8, 8), (64, 16)]
+    assert [(r["requested"], r["lanes"]) for r in rows] == [(8, 8), (64, 32)]
 
 
 def test_the_global_comes_back_after_a_failure(monkeypatch):

@@ -194,29 +194,29 @@ def test_float32_takes_rk4_only_and_names_the_allowed_values():
 
 # ------------------------------------------------------------------ environments
 def test_float32_lanes_agree_whatever_the_block_layout():
-    """A float32 sub-environment gives the same bits in a block of 8 lanes (vector
+    """A float32 sub-environment gives the same bits in a block of 16 lanes (vector
     instructions) and in a block of one lane (scalar code), autoreset included: the
-    sub-environments 0 and 1 of a 16-env and of a 2-env vector environment."""
+    sub-environment 0 of a 16-env and of a 1-env vector environment."""
     n, steps = 16, 60
     actions = np.random.default_rng(5).uniform(-0.2, 1.0, size=(steps, n, 1)).astype(np.float32)
     runs = []
-    for num in (n, 2):
+    for num in (n, 1):
         env = gym.make_vec(SPEED, num_envs=num, vectorization_mode="vector_entry_point",
                            precision="float32", kernel="specialised", **SHORT)
-        assert env.unwrapped._bufs.blocks.lanes == (8 if num == n else 1)
+        assert env.unwrapped._bufs.blocks.lanes == (16 if num == n else 1)
         obs, _ = env.reset(seed=321)
-        rec = [obs[:2]]
+        rec = [obs[:1]]
         for k in range(steps):
             obs, rew, term, trunc, info = env.step(actions[k, :num])
-            rec.append(np.concatenate([obs[:2], rew[:2, None], term[:2, None],
-                                       trunc[:2, None]], axis=1))
+            rec.append(np.concatenate([obs[:1], rew[:1, None], term[:1, None],
+                                       trunc[:1, None]], axis=1))
         env.close()
         runs.append(rec)
     ends = 0
     for k, (a, b) in enumerate(zip(*runs)):
         assert np.array_equal(a, b), k
         ends += int(a[:, -2:].sum()) if k else 0
-    assert ends >= 2  # both episodes ended and restarted
+    assert ends >= 1  # the episode ended and restarted
 
 
 def test_the_single_environment_refuses_float32():

@@ -8,7 +8,9 @@ Measurements (the targets are the project's, from the Integrators issue):
   side (:mod:`abb_gym.benchmarks.numpy_reference`), at the loosest tolerance whose error over
   the run-up is no worse than the kernel's: what a user would otherwise write;
 * single-environment steps per second through ``gym.make`` and the native vector environment
-  at 1024 sub-environments (when :mod:`abb_gym.envs` is installed), and its memory at 4096.
+  at 1024 sub-environments (when :mod:`abb_gym.envs` is installed), and its memory at 4096;
+* CPU time per env-step side by side (:mod:`abb_gym.benchmarks.env_cost`): the CartPole ratio
+  per core, ball counts, the washer, batch sizes with the default threads and one.
 
 Wall times are the best of several repeats; the machine is shared and noisy, so these are
 benchmarks, not tests.  :func:`iter_speed` yields each row as soon as it is measured (the
@@ -137,8 +139,13 @@ def stepping_rates(quick: bool = False) -> tuple[list[dict], float]:
 COLUMNS = ("measurement", "value", "target", "note")
 
 
-def iter_speed(quick: bool = False) -> Iterator[dict]:
-    """Every row of the benchmark, each as soon as it is measured."""
+def iter_speed(quick: bool = False, costs_only: bool = False) -> Iterator[dict]:
+    """Every row of the benchmark, each as soon as it is measured (``costs_only``: the rows
+    of :mod:`abb_gym.benchmarks.env_cost` alone)."""
+    if costs_only:
+        from . import env_cost
+        yield from env_cost.speed_rows(quick=quick)
+        return
     yield from runup_wall_time(5 if quick else 20)
     step_rows, scipy_rate = stepping_rates(quick)
     yield from step_rows
@@ -147,6 +154,8 @@ def iter_speed(quick: bool = False) -> Iterator[dict]:
     except ImportError:  # the environments are not installed
         return
     yield from env_speed.measure(scipy_rate, quick=quick)
+    from . import env_cost
+    yield from env_cost.speed_rows(quick=quick)
 
 
 def run_speed(quick: bool = False) -> list[dict]:

@@ -23,6 +23,10 @@ def register(sub) -> None:
     spd = bsub.add_parser("speed", help="throughput of simulate, gym.make and the vector env")
     spd.add_argument("--out", default="out/bench", help="folder for the Markdown table")
     spd.add_argument("--quick", action="store_true", help="shorter measurements (smoke test)")
+    spd.add_argument("--costs-only", action="store_true",
+                     help="only the side-by-side CPU-time tables (benchmarks.env_cost)")
+    spd.add_argument("--docs", default=None, metavar="PATH",
+                     help="also write the performance page there (docs/performance.md)")
     spd.set_defaults(func=run_speed)
 
 
@@ -66,7 +70,7 @@ def run_speed(args) -> int:
     rows: list[dict] = []
 
     def measured():
-        for row in iter_speed(quick=args.quick):
+        for row in iter_speed(quick=args.quick, costs_only=args.costs_only):
             rows.append(row)
             yield row
 
@@ -75,4 +79,12 @@ def run_speed(args) -> int:
         sys.stdout.flush()
     write_text(out / "speed.md", markdown_table(rows, COLUMNS) + "\n")
     print(f"wrote {out / 'speed.md'}")
+    from ..benchmarks.env_cost import performance_page
+    page = performance_page(rows, COLUMNS)
+    (out / "performance.md").write_text(page)
+    print(f"wrote {out / 'performance.md'}")
+    if args.docs:
+        Path(args.docs).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.docs).write_text(page)
+        print(f"wrote {args.docs}")
     return 0

@@ -83,7 +83,9 @@ class Buffers:
         if self._step is None:
             self._step = self._stepper().entry(*self.kernel_args(),
                                                generic=self.kernel == "generic")
-        return self._step
+        blocks = self.blocks.s.shape[0]
+        # the blocks in parallel on the threads that the free CPUs allow (batch.ParallelCall)
+        return batch.ParallelCall(self._step, blocks) if blocks > 1 else self._step
 
     def _stepper(self):
         return kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial

@@ -19,6 +19,12 @@ lane: the same code.
 * :func:`run_batch` - ``integrators.run`` for ``N`` environments (own parameters, own drive
   tables, shared output times), parallel over blocks with ``numba.prange``.
 
+**Threads.**  A batch of at most :data:`MAX_LANES` environments is one block and runs on one
+thread (:func:`lanes_per_block`); larger batches run their blocks in parallel on as many
+threads as other processes leave CPUs free (:func:`parallel_threads`, :class:`ParallelCall`,
+:class:`abb_gym._threads.FreeCpus`), so that a busy machine never makes the default slower
+than one thread.  Neither the block shape nor the thread count changes a result.
+
 Lanes of a block run until the block's slowest lane is done, so a block works as long as its
 largest step count: callers that mix step sizes group lanes of similar step size into the
 same block (``order``, below; :func:`lane_order`).
@@ -75,10 +81,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import get_num_threads
+from numba import get_num_threads, set_num_threads
 from numba.extending import overload
 
 from .._numba import njit, prange
+from .._threads import free_cpus
 from . import drive_law as dl
 from . import elementary as el
 from . import integrators as integ
@@ -90,7 +97,7 @@ from .steps import default_step
 from .specialise import Specialised, resolve_kernel
 
 __all__ = ["advance_block", "run_batch", "run_inputs", "Blocks", "lanes_per_block",
-           "lane_order", "thread_parts"]
+           "lane_order", "thread_parts", "parallel_threads", "ParallelCall"]
 
 # f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators
 (F_T0, F_T1, F_HMAX, F_TP, F_PE, F_H, F_TC, F_TT, F_TFAIL, W_INT, W_MAX, W_XS, W_YS,
@@ -133,14 +140,60 @@ def work_rows(n_balls: int, dtype) -> int:
     return n_balls + (1 if np.dtype(dtype) == np.float32 else 0)
 
 
-def lanes_per_block(n_envs: int, cores: int = 2) -> int:
+def lanes_per_block(n_envs: int, cores: int = 1) -> int:
     """Lanes per block for ``n_envs`` environments: a power of two up to :data:`MAX_LANES`,
-    small enough that there are at least ``cores`` blocks to run in parallel (1 for a single
-    environment)."""
+    small enough that there are at least ``cores`` blocks (1 for a single environment).
+
+    The default is one block of as many lanes as fit, so that only batches of more than
+    :data:`MAX_LANES` environments run blocks in parallel.  Split in two blocks of half the
+    lanes for a second thread, a small batch gained 1.0-1.2x on a quiet machine and lost
+    3-4x beside one busy process (the parallel region waits for its second thread), while a
+    wide block is cheaper per lane (the right-hand side's fixed cost, :data:`MAX_LANES`);
+    ``abb-gym bench speed`` measures the batch sizes with the default threads and one."""
     lanes = 1
     while lanes * 2 <= MAX_LANES and lanes * 2 * cores <= n_envs:
         lanes *= 2
     return lanes
+
+
+#: free CPUs beyond the first (:func:`abb_gym._threads.free_cpus`) that a parallel loop needs
+#: for each further thread: a second thread only when another process leaves at least 0.8 of
+#: a second CPU idle.
+THREAD_FREE = 0.8
+
+
+def parallel_threads(n_blocks: int) -> int:
+    """Threads for a parallel loop over ``n_blocks`` blocks: one per block, at most the
+    caller's numba thread count (numba's default, or :func:`abb_gym._threads.share_cores`),
+    and one more than the CPUs beyond the first that other processes leave free
+    (:data:`THREAD_FREE`).  The thread count never changes a result: every lane's arithmetic
+    is its own (``tests/test_threads.py``)."""
+    limit = get_num_threads()
+    if n_blocks < 2 or limit < 2:
+        return 1
+    free = free_cpus()
+    return max(1, min(n_blocks, limit, 1 + int((free - 1.0) / THREAD_FREE + 1e-9)))
+
+
+class ParallelCall:
+    """``fn(*args)`` (a compiled function with a parallel loop over ``n_blocks`` blocks) on
+    :func:`parallel_threads` threads, the caller's thread count restored afterwards; the
+    environments' step and :func:`run_batch` call their kernels so.  About 2 us a call."""
+
+    def __init__(self, fn, n_blocks: int):
+        self.fn = fn
+        self.n_blocks = int(n_blocks)
+
+    def __call__(self, *args):
+        threads = parallel_threads(self.n_blocks)
+        before = get_num_threads()
+        if threads == before:
+            return self.fn(*args)
+        set_num_threads(threads)
+        try:
+            return self.fn(*args)
+        finally:
+            set_num_threads(before)
 
 
 def lane_order(step_sizes: np.ndarray, lanes: int = 1, parts: int = 1) -> np.ndarray:
@@ -607,4 +660,5 @@ def run_batch(s0, t_out, seg_d, nseg, p, b, dt_max, out, status, method=integ.ME
         spec = mdl.spec_of(p[group], seg_d[group][valid])
         call = (_run_batch_specialised if resolve_kernel(kernel, group_lanes) == "specialised"
                 else _run_batch_specialised.generic)
-        call(*args, group, group_lanes, int(method), nb, spec, np.empty(0, dtype))
+        ParallelCall(call, -(-group.size // group_lanes))(
+            *args, group, group_lanes, int(method), nb, spec, np.empty(0, dtype))

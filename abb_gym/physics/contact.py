@@ -60,33 +60,83 @@ def pair_geometry(phi_i, phi_j, big_r, reach):
     return pen, dchord, math.sin(half)
 
 
+@njit(cache=True, inline="always")
+def pair_force(phi_i, phi_j, dphi_i, dphi_j, big_r, reach, mi, mj, k, zeta):
+    """(touching, q [N m], radial force [N]) of the pair of balls at angles ``phi_i``,
+    ``phi_j`` [rad] with angular speeds ``dphi_i``, ``dphi_j`` [rad/s], effective masses ``mi``,
+    ``mj`` [kg] and ``reach`` = r_i + r_j [m]: the generalised force is +q on ball j and -q on
+    ball i, the radial force acts outward on both; q and the radial force are 0 when the pair
+    does not touch (penetration or force not positive).  Written without branches, so that a
+    lane loop over it vectorises; where the pair touches, every operation is the one the
+    module docstring's force law needs, in the same order whoever calls it."""
+    pen, dchord, sh = pair_geometry(phi_i, phi_j, big_r, reach)
+    rate = -dchord * (dphi_j - dphi_i)
+    force = k * pen + 2.0 * zeta * math.sqrt(k * mi * mj / (mi + mj)) * rate
+    on = pen > 0.0 and force > 0.0
+    return on, (force * dchord if on else 0.0), (force * sh if on else 0.0)
+
+
 @njit(cache=True)
-def ball_contacts_lane(s, l, nq, b, col_r, col_m, big_r, k, zeta, out, col_q, col_n):
-    """Generalised contact forces on the ball angles of lane ``l`` into ``out[:, col_q, l]``
-    [N m] and the outward radial contact force on each ball into ``out[:, col_n, l]`` [N].
+def ball_contacts_lane(s, l, nq, b, col_r, col_m, big_r, k, zeta, out, row_q, row_n):
+    """Generalised contact forces on the ball angles of lane ``l`` over **all pairs** into
+    ``out[row_q + i, l]`` [N m] and the outward radial contact force on each ball into
+    ``out[row_n + i, l]`` [N] (rows of a lane-last array).
 
     ``s`` (state, lanes), ``b[i, col_r, l]`` ball radii [m], ``b[i, col_m, l]`` effective
     masses along the track [kg] (the lane layout of :func:`abb_gym.physics.model.
-    accelerations_block`)."""
+    accelerations_block`).  The kernels use it where the neighbour list does not apply
+    (:func:`ring_holds`) and in float32 blocks."""
     n = b.shape[0]
     for i in range(n):
-        out[i, col_q, l] = 0.0
-        out[i, col_n, l] = 0.0
+        out[row_q + i, l] = 0.0
+        out[row_n + i, l] = 0.0
     for i in range(n - 1):
         for j in range(i + 1, n):
-            pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
-                                            b[i, col_r, l] + b[j, col_r, l])
-            if pen > 0.0:
-                rate = -dchord * (s[nq + 3 + j, l] - s[nq + 3 + i, l])
-                mi = b[i, col_m, l]
-                mj = b[j, col_m, l]
-                force = k * pen + 2.0 * zeta * math.sqrt(k * mi * mj / (mi + mj)) * rate
-                if force > 0.0:
-                    q = force * dchord
-                    out[j, col_q, l] += q
-                    out[i, col_q, l] -= q
-                    out[i, col_n, l] += force * sh
-                    out[j, col_n, l] += force * sh
+            on, q, radial = pair_force(s[3 + i, l], s[3 + j, l], s[nq + 3 + i, l],
+                                       s[nq + 3 + j, l], big_r,
+                                       b[i, col_r, l] + b[j, col_r, l], b[i, col_m, l],
+                                       b[j, col_m, l], k, zeta)
+            if on:
+                out[row_q + j, l] += q
+                out[row_q + i, l] -= q
+                out[row_n + i, l] += radial
+                out[row_n + j, l] += radial
+
+
+def neighbour_reach_angle(radii, big_r: float) -> float:
+    """The angular distance [rad] at or beyond which no two balls of radii ``radii`` [m] on a
+    track of radius ``big_r`` [m] can touch: 2 asin(2 r_max / (2 R)), widened by a relative
+    1e-6 against rounding (pi when the balls are as large as the track).  The kernels' guard
+    of the neighbour list (:func:`ring_holds`) compares the arc across one ball with it."""
+    half = min(1.0, max(radii) / big_r)
+    return min(math.pi, 2.0 * math.asin(half) * (1.0 + 1e-6))
+
+
+@njit(cache=True, inline="always")
+def mod_turn(a):
+    """``a`` [rad] reduced to [0, 2 pi) (floor, which vectorises)."""
+    return a - TWO_PI * math.floor(a * (1.0 / TWO_PI))
+
+
+@njit(cache=True, inline="always")
+def ring_holds(s, l, n, reach_angle):
+    """Whether the neighbour list of lane ``l`` is exact: the balls, taken in index order,
+    go round the race once (index order is their order along the race), and the arc across
+    every ball, from its previous to its next neighbour, is at least ``reach_angle``
+    (:func:`neighbour_reach_angle`), so that no two balls but neighbours can touch.  For
+    ``n`` >= 4; with 2 or 3 balls every pair is a neighbour pair.  Without branches (it
+    vectorises); the forward gaps are reduced to [0, 2 pi), so their sum is 2 pi times the
+    number of turns."""
+    total = 0.0
+    first = mod_turn(s[3, l] - s[3 + n - 1, l])
+    prev = first
+    narrow = 0.0
+    for i in range(n):
+        gap = mod_turn(s[3 + i + 1, l] - s[3 + i, l]) if i + 1 < n else first
+        total += gap
+        narrow = max(narrow, reach_angle - (prev + gap))
+        prev = gap
+    return total < 3.0 * math.pi and narrow <= 0.0
 
 
 @njit(cache=True)
@@ -102,8 +152,18 @@ def contact_energy(q, b, col_r, big_r, k):
     return e
 
 
+@njit(cache=True, inline="always")
+def _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k):
+    """k (1/m_i + 1/m_j) [1/s^2] of the pair (i, j) of lane ``l`` if it touches, else 0."""
+    pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
+                                    b[i, col_r, l] + b[j, col_r, l])
+    if pen > 0.0:
+        return k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
+    return 0.0
+
+
 @njit(cache=True)
-def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
+def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta, reach_angle=-1.0):
     """Bound on the contact eigenvalue magnitude of ball i of lane ``l`` [1/s] (0 if it
     touches nothing).
 
@@ -111,15 +171,27 @@ def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
     two largest terms only: in a ring a ball has one neighbour on each side, and the state at
     which the step rule asks (all balls at ph = 0, :func:`abb_gym.physics.steps.stiff_rate`)
     would otherwise count every ball.  Overdamped contacts (zeta > 1/2) have a fast real root
-    up to 2 zeta omega."""
+    up to 2 zeta omega.
+
+    With ``reach_angle`` (:func:`neighbour_reach_angle`) and four or more balls, only the
+    balls of adjacent index are asked where :func:`ring_holds` says that no other ball can
+    touch (the neighbour list of :func:`abb_gym.physics.model._contacts`): the same two
+    terms, so the same bits, as asking every ball."""
+    n = b.shape[0]
     first = 0.0
     second = 0.0
-    for j in range(b.shape[0]):
-        if j != i:
-            pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
-                                            b[i, col_r, l] + b[j, col_r, l])
-            if pen > 0.0:
-                w2 = k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
+    if reach_angle >= 0.0 and n >= 4 and ring_holds(s, l, n, reach_angle):
+        for j in (n - 1 if i == 0 else i - 1, 0 if i == n - 1 else i + 1):
+            w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
+            if w2 > first:
+                second = first
+                first = w2
+            elif w2 > second:
+                second = w2
+    else:
+        for j in range(n):
+            if j != i:
+                w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
                 if w2 > first:
                     second = first
                     first = w2

@@ -120,7 +120,10 @@ P_MASS, P_KX, P_KY, P_CX, P_CY, P_U0, P_J, P_BETA0, P_R, P_E, P_GAM, P_UREG, P_R
 (P_GRAV, P_GX, P_GY, P_KC, P_ZC, P_DLAW, P_CD0, P_CD1, P_CD2, P_CD3, P_CDINF, P_FRIC, P_MUK,
  P_MUS, P_UFR, P_USTR) = range(14, 30)
 P_EXT = 30  # 1 if any of the extended effects above (or the virtual mass) is on
-N_PARAMS = 31
+# ball-ball contact: the angular distance [rad] beyond which no two balls touch (the guard of
+# the neighbour list, :func:`abb_gym.physics.contact.neighbour_reach_angle`)
+P_REACH = 31
+N_PARAMS = 32
 EXTENDED_EFFECTS = frozenset({"gravity", "ball_contact", "fluid_drag", "virtual_mass",
                               "friction"})
 # per-ball parameter matrix columns: mass [kg], radius [m], spin inertia [kg m^2], race drag
@@ -135,10 +138,16 @@ B_CI, B_II, B_INV = range(10, 13)
 N_BALL_PARAMS = 13
 # scratch of the right-hand side, work[ball, column, lane]: the contact forces, then each
 # ball's terms kept for the second pass (its 1 / I_i is read from B_INV again)
-WORK_COLUMNS = 6
 W_QC = 0  # generalised contact force on the ball [N m]
 W_NC = 1  # outward radial contact force on the ball [N]
 W_FI, W_BX, W_BY, W_BTH = range(2, 6)
+# the ball's shares of the rotor's rows (col_x, col_y, c_i, Jt, Sx, Cy, x, y and th forces)
+W_COLX, W_COLY, W_CI, W_JT, W_SX, W_CY, W_FX, W_FY, W_FTH = range(6, 15)
+# the contact of neighbour pair k (balls k and k + 1, the last with ball 0) in row k: q (+q on
+# the higher index, -q on the lower) [N m] and the radial force [N]; row 0 only: whether the
+# lane's neighbour list is exact (1) or it takes every pair (0) (:func:`_contacts`)
+W_PQ, W_PN, W_RING = 15, 16, 17
+WORK_COLUMNS = 18
 # kernel specialisation: which terms exist (compile-time constants of the vector kernels)
 SPEC_EXT = 1       # an extended effect (gravity, contact, fluid drag, virtual mass, friction)
 SPEC_ECC = 2       # race eccentricity
@@ -174,6 +183,7 @@ def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     if "ball_contact" in effects:
         p[P_KC] = scene.contact_stiffness
         p[P_ZC] = scene.contact_damping_ratio
+        p[P_REACH] = _contact.neighbour_reach_angle(scene.ball_radius, scene.race_radius)
     rho, nu = scene.fluid_state
     law, cdre, cubic, plateau = _fluids.law_coefficients(
         scene.fluid_drag_law, scene.fluid_stokes_drag, scene.fluid_drag_plateau)
@@ -415,6 +425,291 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     return colx, coly, ci, jti, sx, cy, fx, fy, fth, fi, bx, by, bth
 
 
+@njit(cache=True, inline="always")
+def _contacts(s, p, b, ds, work, nb, nq, L):
+    """Pass (1) of :func:`accelerations_block`: each ball's generalised contact force [N m]
+    into ``ds[3 + i]`` and its outward radial contact force [N] into ``ds[nq + 3 + i]``, every
+    lane (0 where a lane has no contact).
+
+    **Neighbour list.**  Balls in one race cannot pass each other: they roll on one track, and
+    a ball that meets another is pushed back by the contact before their centres come closer
+    than about one radius (the penetration of a collision at relative speed v is v /
+    omega_c, :mod:`abb_gym.physics.contact`; the washer's 5 % of the diameter at 0.5 m/s).  Their
+    order along the race therefore never changes, and a ball can only touch the next ball
+    ahead and the next behind: n pairs instead of n (n - 1) / 2 (12 instead of 66 for the
+    washer).  Here the neighbours are the balls of adjacent index (ball n - 1 next to ball 0),
+    each pair computed in lane loops without branches (:func:`~abb_gym.physics.contact.
+    pair_force`), which vectorise but for the sine and cosine of the pair geometry.
+
+    **When it does not apply.**  Index order need not be race order (a scene's or an episode's
+    initial angles in any order), and a penalty contact lets a ball through a neighbour when
+    a collision is fast enough to overlap them by a whole radius (a stiffness far too low for
+    the speeds; the balls then pass, as they do with every pair).  Each lane is therefore
+    checked at every call (:func:`~abb_gym.physics.contact.ring_holds`: index order goes
+    round the race once, and the arc across each ball is at least the reach of a pair, so
+    that no two balls but neighbours can touch), and a lane where that fails takes every
+    pair (:func:`~abb_gym.physics.contact.ball_contacts_lane`), so the result never depends on
+    it.  Where it holds, the pairs left out have no force, and each ball's two neighbour
+    terms are added to 0 in the order of the all-pairs loop (a sum of two terms is the same
+    in either order anyway): the same bits as every pair (``tests/test_contact.py``).  A
+    float32 block takes every pair (the all-pairs loop rounds each sum in float32)."""
+    if el.is_single(s) or nb < 2:
+        for l in range(L):
+            if p[P_KC, l] != 0.0:
+                _contact.ball_contacts_lane(s, l, nq, b, B_RADIUS, B_MEFF, p[P_R, l],
+                                            p[P_KC, l], p[P_ZC, l], ds, 3, nq + 3)
+            else:
+                for i in range(nb):
+                    ds[3 + i, l] = 0.0
+                    ds[nq + 3 + i, l] = 0.0
+        return
+    pairs = 1 if nb == 2 else nb
+    for k in range(pairs):
+        lo = 0 if k == nb - 1 else k
+        hi = nb - 1 if k == nb - 1 else k + 1
+        for l in range(L):
+            _, q, radial = _contact.pair_force(
+                s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l], p[P_R, l],
+                b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l], b[hi, B_MEFF, l],
+                p[P_KC, l], p[P_ZC, l])
+            on = p[P_KC, l] != 0.0
+            work[k, W_PQ, l] = q if on else 0.0
+            work[k, W_PN, l] = radial if on else 0.0
+    for i in range(nb):
+        # ball i is the higher index of pair i - 1 (+q) and the lower of pair i (-q); ball 0
+        # the lower of pair n - 1 too, ball n - 1 its higher (the all-pairs loop's order)
+        for l in range(L):
+            if nb == 2:
+                ds[3 + i, l] = (0.0 + work[0, W_PQ, l]) if i == 1 else (0.0 - work[0, W_PQ, l])
+                ds[nq + 3 + i, l] = 0.0 + work[0, W_PN, l]
+            elif i == 0:
+                ds[3, l] = (0.0 - work[0, W_PQ, l]) - work[nb - 1, W_PQ, l]
+                ds[nq + 3, l] = (0.0 + work[0, W_PN, l]) + work[nb - 1, W_PN, l]
+            elif i == nb - 1:
+                ds[3 + i, l] = (0.0 + work[nb - 1, W_PQ, l]) + work[nb - 2, W_PQ, l]
+                ds[nq + 3 + i, l] = (0.0 + work[nb - 1, W_PN, l]) + work[nb - 2, W_PN, l]
+            else:
+                ds[3 + i, l] = (0.0 + work[i - 1, W_PQ, l]) - work[i, W_PQ, l]
+                ds[nq + 3 + i, l] = (0.0 + work[i - 1, W_PN, l]) + work[i, W_PN, l]
+    if nb >= 4:
+        for l in range(L):
+            work[0, W_RING, l] = 1.0 if _contact.ring_holds(s, l, nb, p[P_REACH, l]) else 0.0
+        for l in range(L):
+            if p[P_KC, l] != 0.0 and work[0, W_RING, l] == 0.0:
+                _contact.ball_contacts_lane(s, l, nq, b, B_RADIUS, B_MEFF, p[P_R, l],
+                                            p[P_KC, l], p[P_ZC, l], ds, 3, nq + 3)
+
+
+@njit(cache=True, inline="always")
+def _lane_drive(t, s, d, l, nq, motor, envelope):
+    """(th, w, alpha, torque) of lane ``l``: the rotor angle [rad], speed [rad/s] and
+    acceleration [rad/s^2] (0 under a motor, where it is an unknown) and the motor torque
+    [N m] (0 under a prescribed spin).  The passes of :func:`accelerations_block` ask again
+    rather than keep them: a few operations, the same bits each time."""
+    x = s[0, l]
+    tau = t[l] - d[dl.D_T0, l]
+    if motor:
+        th = s[2, l]
+        w = s[nq + 2, l]
+        torque = el.like(x, dl.motor_law(
+            tau, w, d[dl.D_TORQUE, l], d[dl.D_GAIN, l], d[dl.D_TW0, l], d[dl.D_TALPHA, l],
+            d[dl.D_TLIM, l], d[dl.D_WNL, l], d[dl.D_PLIM, l], envelope))
+        alpha = el.like(x, 0.0)
+    else:
+        th, w, alpha = dl.prescribed_law(tau, d[dl.D_TH0, l], d[dl.D_W0, l], d[dl.D_ALPHA, l])
+        torque = el.like(x, 0.0)
+    return th, w, alpha, torque
+
+
+@njit(cache=True, inline="always")
+def _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec):
+    """Ball ``i``'s terms in lane ``l`` (:func:`_ball_terms`), its generalised force less any
+    prescribed ``b_th th''``.  The lane's sin and cos of th + gam come from ``ds`` rows 0 and
+    1, the ball's contact force and radial force from rows ``3 + i`` and ``nq + 3 + i``, where
+    :func:`accelerations_block` left them."""
+    ext = (spec & SPEC_EXT) != 0
+    ecc = (spec & SPEC_ECC) != 0
+    roll = (spec & SPEC_ROLL) != 0
+    motor = (spec & SPEC_MOTOR) != 0
+    envelope = (spec & SPEC_ENVELOPE) != 0
+    x = s[0, l]
+    th, w, alpha, _ = _lane_drive(t, s, d, l, nq, motor, envelope)
+    w2 = w * w
+    stg = ds[0, l] if ecc else el.like(x, 0.0)
+    ctg = ds[1, l] if ecc else el.like(x, 0.0)
+    big_r = p[P_R, l]
+    grav = ext and p[P_GRAV, l] != 0.0
+    touch = ext and p[P_KC, l] != 0.0
+    fric = ext and p[P_FRIC, l] != 0.0
+    dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
+    geometry = (big_r, p[P_UREG, l], p[P_E, l], p[P_GAM, l], stg, ctg, p[P_GX, l],
+                p[P_GY, l])
+    law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
+           p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+    flags = (ext, ecc, roll, grav, touch, fric)
+    colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
+        th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
+        (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_BETA, l],
+         b[i, B_MUR, l]), geometry,
+        (ds[3 + i, l], ds[nq + 3 + i, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
+         b[i, B_REU, l]) + law, flags)
+    if not motor:
+        fi -= bth * alpha
+    return colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth
+
+
+@njit(cache=True, error_model="numpy", noalias=True)
+def _ball_pass(t, s, p, b, d, ds, fi_row, bx_row, by_row, bth_row, colx_row, coly_row, ci_row,
+               jt_row, sx_row, cy_row, fx_row, fy_row, fth_row, i, nq, spec):
+    """Ball ``i``'s terms (:func:`_lane_ball_terms`) in every lane, into the rows of
+    ``work[i]`` given one by one (the split passes of :func:`accelerations_block`).
+
+    A function of its own, not inlined by numba, so that each output row is an argument of
+    its own under the no-alias promise (views of one array that do not overlap:
+    :mod:`abb_gym._numba`): written as thirteen rows of one array, LLVM could not tell that
+    they do not overlap, and left the lane loop scalar."""
+    for l in range(lanes_of(s, spec)):
+        colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _lane_ball_terms(
+            t, s, p, b, d, ds, i, l, nq, spec)
+        fi_row[l] = fi
+        bx_row[l] = bx
+        by_row[l] = by
+        bth_row[l] = bth
+        colx_row[l] = colx
+        coly_row[l] = coly
+        ci_row[l] = ci
+        jt_row[l] = jti
+        sx_row[l] = sxi
+        cy_row[l] = cyi
+        fx_row[l] = fxi
+        fy_row[l] = fyi
+        fth_row[l] = fthi
+
+
+@njit(cache=True, inline="always")
+def _rotor_start(t, s, p, d, l, nq, motor, envelope):
+    """Lane ``l``'s rotor rows before the balls' shares: (Sx, Cy, Jt, x, y and th forces,
+    th'', the 12 sums of the Schur complement at 0) and (th, w, alpha, vx, vy)."""
+    x = s[0, l]
+    y = s[1, l]
+    vx = s[nq, l]
+    vy = s[nq + 1, l]
+    th, w, alpha, torque = _lane_drive(t, s, d, l, nq, motor, envelope)
+    w2 = w * w
+    sth, cth = el.sincos(th)
+    u0 = p[P_U0, l]
+    sx = u0 * sth
+    cy = u0 * cth
+    fx = -p[P_CX, l] * vx - p[P_KX, l] * x + u0 * cth * w2
+    fy = -p[P_CY, l] * vy - p[P_KY, l] * y + u0 * sth * w2
+    fth = torque - p[P_BETA0, l] * w
+    jt = p[P_J, l]
+    zero = el.like(x, 0.0)
+    # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
+    # (d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2)
+    schur = (zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero, zero)
+    return (sx, cy, jt, fx, fy, fth) + schur, (th, w, alpha, vx, vy)
+
+
+@njit(cache=True, inline="always")
+def _add_ball(acc, terms, inv, motor):
+    """``acc`` (:func:`_rotor_start`) plus one ball's ``terms`` (:func:`_lane_ball_terms`)
+    with its 1 / I_i ``inv``, each sum in ball order."""
+    (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
+    colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = terms
+    sx += sxi
+    cy += cyi
+    jt += jti
+    fx += fxi
+    fy += fyi
+    fth += fthi
+    d00 += colx * bx * inv
+    d01 += colx * by * inv
+    d10 += coly * bx * inv
+    d11 += coly * by * inv
+    g0 += colx * fi * inv
+    g1 += coly * fi * inv
+    if motor:
+        d02 += colx * bth * inv
+        d12 += coly * bth * inv
+        d20 += ci * bx * inv
+        d21 += ci * by * inv
+        d22 += ci * bth * inv
+        g2 += ci * fi * inv
+    return (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2)
+
+
+@njit(cache=True, inline="always")
+def _solve_rotor(acc, lane, p, l, ext, motor):
+    """(x'', y'', th'') of lane ``l`` from its sums ``acc`` and ``lane`` (:func:`_rotor_start`):
+    gravity's rotor terms, the 2x2 (prescribed spin) or 3x3 (motor) system."""
+    (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
+    alpha = lane[2]
+    total = p[P_MASS, l]
+    if ext and p[P_GRAV, l] != 0.0:
+        gx = p[P_GX, l]
+        gy = p[P_GY, l]
+        fx += total * gx
+        fy += total * gy
+        fth += gy * cy - gx * sx
+    # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] minus D
+    a00 = total - d00
+    a01 = -d01
+    a10 = -d10
+    a11 = total - d11
+    if motor:
+        a02 = -sx - d02
+        a12 = cy - d12
+        a20 = -sx - d20
+        a21 = cy - d21
+        a22 = jt - d22
+        fx -= g0
+        fy -= g1
+        fth -= g2
+        c00 = a11 * a22 - a12 * a21
+        c01 = a12 * a20 - a10 * a22
+        c02 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
+        ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
+        ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
+    else:
+        # the prescribed th'' moves to the right-hand side
+        fx += -sx * -alpha - g0
+        fy -= cy * alpha + g1
+        det = a00 * a11 - a01 * a10
+        ax = (fx * a11 - a01 * fy) / det
+        ay = (a00 * fy - a10 * fx) / det
+        ath = alpha
+    return ax, ay, ath
+
+
+@njit(cache=True, inline="always")
+def _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor):
+    """The derivatives of lane ``l``: the balls' from their rows of ``work`` (``W_FI`` holds
+    Q_i less the prescribed b_th th'' already), then the rotor's."""
+    for i in range(nb):
+        ds[3 + i, l] = s[nq + 3 + i, l]
+        qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
+        if motor:
+            qi -= work[i, W_BTH, l] * ath
+        ds[nq + 3 + i, l] = qi * b[i, B_INV, l]
+    ds[0, l] = lane[3]
+    ds[1, l] = lane[4]
+    ds[2, l] = s[nq + 2, l] if motor else lane[1]
+    ds[nq, l] = ax
+    ds[nq + 1, l] = ay
+    ds[nq + 2, l] = ath
+
+
+#: ball counts up to which the right-hand side is one lane loop around the ball loop (LLVM
+#: unrolls the ball loop whole and vectorises the lane loop); more balls take the split
+#: passes of :func:`accelerations_block`.  At 3 balls the split passes were faster (the
+#: right-hand side at 128 lanes, CPU time: 122 ns per lane fused, against 79 ns for 5 balls
+#: split)
+FUSED_BALLS = 2
+
+
 @njit(cache=True, error_model="numpy", noalias=True)
 def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     """The equations of motion, once, for a block of lanes (one environment per lane):
@@ -425,165 +720,69 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     WORK_COLUMNS, L) scratch (the contact forces, the balls' terms).  ``spec`` (``SPEC_*`` bits)
     says which terms exist; with ``nb`` and ``spec`` compile-time constants (literal types given
     by :class:`~abb_gym.physics.specialise.Specialised`: one compilation per literal pair) the
-    lane loop compiles to straight-line code over all lanes at once (vector instructions, with
+    lane loops compile to straight-line code over all lanes at once (vector instructions, with
     the LLVM options of :mod:`abb_gym.physics.elementary`); with run-time values it is the
     general kernel.  Either way every lane does the same arithmetic in the same order, so the
     results agree bit for bit.  No two array arguments may overlap (compiled ``noalias``, which
     spares the vector loop its run-time overlap checks: :mod:`abb_gym._numba`).
 
     The balls are eliminated by a Schur complement (module docstring) accumulated ball by
-    ball; each ball's terms (generalised force, the rows of its equation) are kept in
-    ``work`` for the second pass, which solves for the balls' accelerations."""
+    ball (:func:`_add_ball`).  **Loop order.**  First the contact forces (:func:`_contacts`)
+    and the race's sin and cos of th + gam go into rows of ``ds`` that the derivatives
+    overwrite last.  Up to :data:`FUSED_BALLS` balls, one lane loop then does the rest, the
+    ball loop inside it, which LLVM unrolls whole, so that the lane loop vectorises.  With
+    more balls LLVM unrolled it no longer, and the lane loop stayed scalar (``yoshida_odd``'s
+    right-hand side at 128 lanes: 42-52 ns per lane at 2-3 balls, 290 at 4, 580-960 at 5-12:
+    the "vectorisation cliff"); they take split passes, each a lane loop: per ball its terms
+    (:func:`_ball_pass`, kept in ``work``), then per lane the sums in ball order, the solve
+    and the derivatives.  Each pass reads arrays that it does not write, so its lane loop
+    needs no overlap checks.  The split passes cost two balls 15 % more (the terms go through
+    memory), hence the fused loop where it vectorises.  Each lane's operations and their
+    order are the same either way, so the results are the same bits."""
     L = lanes_of(s, spec)
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
     ecc = (spec & SPEC_ECC) != 0
-    roll = (spec & SPEC_ROLL) != 0
     motor = (spec & SPEC_MOTOR) != 0
     envelope = (spec & SPEC_ENVELOPE) != 0
+    # pair forces first, into the balls' rows of ds: the contact's radial part loads the race
+    # (friction, rolling); and the race's sin and cos of th + gam into ds rows 0 and 1
+    if ext:
+        _contacts(s, p, b, ds, work, nb, nq, L)
+    if ecc:
+        for l in range(L):
+            th, _, _, _ = _lane_drive(t, s, d, l, nq, motor, envelope)
+            stg, ctg = el.sincos(th + p[P_GAM, l])
+            ds[0, l] = stg
+            ds[1, l] = ctg
+    if nb <= FUSED_BALLS:
+        for l in range(L):
+            acc, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
+            for i in range(nb):
+                terms = _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec)
+                work[i, W_FI, l] = terms[9]
+                work[i, W_BX, l] = terms[10]
+                work[i, W_BY, l] = terms[11]
+                work[i, W_BTH, l] = terms[12]
+                acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
+            ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+            _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
+        return
+    for i in range(nb):
+        wi = work[i]
+        _ball_pass(t, s, p, b, d, ds, wi[W_FI], wi[W_BX], wi[W_BY], wi[W_BTH], wi[W_COLX],
+                   wi[W_COLY], wi[W_CI], wi[W_JT], wi[W_SX], wi[W_CY], wi[W_FX], wi[W_FY],
+                   wi[W_FTH], i, nq, spec)
     for l in range(L):
-        x = s[0, l]
-        y = s[1, l]
-        vx = s[nq, l]
-        vy = s[nq + 1, l]
-        tau = t[l] - d[dl.D_T0, l]
-        if motor:
-            th = s[2, l]
-            w = s[nq + 2, l]
-            torque = el.like(x, dl.motor_law(
-                tau, w, d[dl.D_TORQUE, l], d[dl.D_GAIN, l], d[dl.D_TW0, l], d[dl.D_TALPHA, l],
-                d[dl.D_TLIM, l], d[dl.D_WNL, l], d[dl.D_PLIM, l], envelope))
-            alpha = el.like(x, 0.0)
-        else:
-            th, w, alpha = dl.prescribed_law(tau, d[dl.D_TH0, l], d[dl.D_W0, l],
-                                             d[dl.D_ALPHA, l])
-            torque = el.like(x, 0.0)
-        big_r = p[P_R, l]
-        ureg = p[P_UREG, l]
-        e = p[P_E, l]
-        gam = p[P_GAM, l]
-        gx = p[P_GX, l]
-        gy = p[P_GY, l]
-        grav = ext and p[P_GRAV, l] != 0.0
-        touch = ext and p[P_KC, l] != 0.0
-        fric = ext and p[P_FRIC, l] != 0.0
-        dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
-        if touch:
-            # pair forces first: the contact's radial part loads the race (friction, rolling)
-            _contact.ball_contacts_lane(s, l, nq, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l],
-                                        p[P_ZC, l], work, W_QC, W_NC)
-        w2 = w * w
-        sth, cth = el.sincos(th)
-        stg = el.like(x, 0.0)
-        ctg = el.like(x, 0.0)
-        if ecc:
-            stg, ctg = el.sincos(th + gam)
-        geometry = (big_r, ureg, e, gam, stg, ctg, gx, gy)
-        law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
-               p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
-        flags = (ext, ecc, roll, grav, touch, fric)
-        total = p[P_MASS, l]
-        u0 = p[P_U0, l]
-        sx = u0 * sth
-        cy = u0 * cth
-        fx = -p[P_CX, l] * vx - p[P_KX, l] * x + u0 * cth * w2
-        fy = -p[P_CY, l] * vy - p[P_KY, l] * y + u0 * sth * w2
-        fth = torque - p[P_BETA0, l] * w
-        jt = p[P_J, l]
-        # Schur complement of the (diagonal) ball block: D = sum col b^T / I, g = sum col Q / I
-        zero = el.like(x, 0.0)
-        d00 = zero
-        d01 = zero
-        d10 = zero
-        d11 = zero
-        d02 = zero
-        d12 = zero
-        d20 = zero
-        d21 = zero
-        d22 = zero
-        g0 = zero
-        g1 = zero
-        g2 = zero
+        acc, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
         for i in range(nb):
-            colx, coly, ci, jti, sxi, cyi, fxi, fyi, fthi, fi, bx, by, bth = _ball_terms(
-                th, w, w2, s[3 + i, l], s[nq + 3 + i, l],
-                (b[i, B_MASS, l], b[i, B_INERTIA, l], b[i, B_CI, l], b[i, B_BETA, l],
-                 b[i, B_MUR, l]), geometry,
-                (work[i, W_QC, l], work[i, W_NC, l], b[i, B_KLIN, l], b[i, B_KQUAD, l],
-                 b[i, B_REU, l]) + law, flags)
-            sx += sxi
-            cy += cyi
-            jt += jti
-            fx += fxi
-            fy += fyi
-            fth += fthi
-            if not motor:
-                fi -= bth * alpha
-            work[i, W_FI, l] = fi
-            work[i, W_BX, l] = bx
-            work[i, W_BY, l] = by
-            if motor:
-                work[i, W_BTH, l] = bth
-            inv = b[i, B_INV, l]
-            d00 += colx * bx * inv
-            d01 += colx * by * inv
-            d10 += coly * bx * inv
-            d11 += coly * by * inv
-            g0 += colx * fi * inv
-            g1 += coly * fi * inv
-            if motor:
-                d02 += colx * bth * inv
-                d12 += coly * bth * inv
-                d20 += ci * bx * inv
-                d21 += ci * by * inv
-                d22 += ci * bth * inv
-                g2 += ci * fi * inv
-        if grav:
-            fx += total * gx
-            fy += total * gy
-            fth += gy * cy - gx * sx
-        # top block [[M, 0, -Sx], [0, M, Cy], [-Sx, Cy, Jt]] minus D
-        a00 = total - d00
-        a01 = -d01
-        a10 = -d10
-        a11 = total - d11
-        if motor:
-            a02 = -sx - d02
-            a12 = cy - d12
-            a20 = -sx - d20
-            a21 = cy - d21
-            a22 = jt - d22
-            fx -= g0
-            fy -= g1
-            fth -= g2
-            c00 = a11 * a22 - a12 * a21
-            c01 = a12 * a20 - a10 * a22
-            c02 = a10 * a21 - a11 * a20
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            ax = (fx * c00 + a01 * (a12 * fth - fy * a22) + a02 * (fy * a21 - a11 * fth)) / det
-            ay = (a00 * (fy * a22 - a12 * fth) + fx * c01 + a02 * (a10 * fth - fy * a20)) / det
-            ath = (a00 * (a11 * fth - fy * a21) + a01 * (fy * a20 - a10 * fth) + fx * c02) / det
-        else:
-            # the prescribed th'' moves to the right-hand side
-            fx += -sx * -alpha - g0
-            fy -= cy * alpha + g1
-            det = a00 * a11 - a01 * a10
-            ax = (fx * a11 - a01 * fy) / det
-            ay = (a00 * fy - a10 * fx) / det
-            ath = alpha
-        for i in range(nb):
-            ds[3 + i, l] = s[nq + 3 + i, l]
-            # W_FI holds Q_i less the prescribed b_th th'' already
-            qi = work[i, W_FI, l] - work[i, W_BX, l] * ax - work[i, W_BY, l] * ay
-            if motor:
-                qi -= work[i, W_BTH, l] * ath
-            ds[nq + 3 + i, l] = qi * b[i, B_INV, l]
-        ds[0, l] = vx
-        ds[1, l] = vy
-        ds[2, l] = s[nq + 2, l] if motor else w
-        ds[nq, l] = ax
-        ds[nq + 1, l] = ay
-        ds[nq + 2, l] = ath
+            terms = (work[i, W_COLX, l], work[i, W_COLY, l], work[i, W_CI, l],
+                     work[i, W_JT, l], work[i, W_SX, l], work[i, W_CY, l], work[i, W_FX, l],
+                     work[i, W_FY, l], work[i, W_FTH, l], work[i, W_FI, l], work[i, W_BX, l],
+                     work[i, W_BY, l], work[i, W_BTH, l])
+            acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
+        ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+        _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
 
 
 def spec_of(p: np.ndarray, d: np.ndarray) -> int:
@@ -737,8 +936,9 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                         big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
             lam[nq + 3 + i, l] = rate / b[i, B_II, l]
             if ext and p[P_KC, l] != 0.0:
-                lam[nq + 3 + i, l] += _contact.contact_rate_lane(s, l, i, b, B_RADIUS, B_MEFF,
-                                                                 big_r, p[P_KC, l], p[P_ZC, l])
+                lam[nq + 3 + i, l] += _contact.contact_rate_lane(
+                    s, l, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l], p[P_ZC, l],
+                    p[P_REACH, l])
 
 
 @njit(cache=True, error_model="numpy")
