@@ -179,6 +179,12 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         return self._bufs.history(i)
 
     @property
+    def observation_names(self) -> list[str]:
+        """Names of one sub-environment's observation entries, in order
+        (:mod:`abb_gym.envs.observation`)."""
+        return list(self.setup.obs_names)
+
+    @property
     def states(self) -> np.ndarray:
         """Copy of the model states, shape (num_envs, state length)."""
         return self._bufs.s.copy()

@@ -35,6 +35,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       curriculum: {fields: [critical_speed_scale], start: 0.2, full_at: 0.5}  # narrow first
       algo: sac                     # sac or tqc (policy MlpPolicy); default from the policy
       init_from: {folder: runs/x, model: best}   # start from that run's weights (fine-tune)
+      imitate: {policy: "baseline:redistribute_low", episodes: 256}   # clone, then PPO
 
 The keys, declared once on :class:`TrainConfig`:
 
@@ -117,9 +118,9 @@ ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
                 "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping",
-                "curriculum", "algo", "init_from")
+                "curriculum", "algo", "init_from", "imitate")
 #: of those, the ones only the ``_abb_gym`` section may hold
-SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo", "init_from")
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo", "init_from", "imitate")
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 
@@ -329,6 +330,11 @@ class TrainConfig:
                                                    "weights and statistics, {folder: PATH, "
                                                    "model: best|final} "
                                                    "(abb_gym.rl.warm_start; null: none)")
+    imitate: dict[str, Any] | None = declare(None, kind="any",
+                                             doc="_abb_gym: clone a teacher policy before "
+                                                 "PPO starts, {policy: SPEC, episodes, "
+                                                 "epochs, log_std} (abb_gym.rl.imitation; "
+                                                 "null: none)")
     source: str = declare("", kind="text", doc="file the config came from")
 
     @classmethod
@@ -404,6 +410,9 @@ class TrainConfig:
                 v = shaping_settings(v, where, TrainConfigError)
             elif key == "init_from":
                 v = warm_start_settings(v, where, TrainConfigError)
+            elif key == "imitate":
+                from .imitation import imitation_settings
+                v = imitation_settings(v, where, TrainConfigError)
             elif key == "tensorboard_log":
                 # SB3 would only fail when training starts, after the environments are built
                 if v is not None and (not isinstance(v, str) or not v):

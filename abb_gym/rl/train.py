@@ -401,6 +401,10 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         model.set_logger(configure(str(run_dir), ["stdout"] if verbose else []))
     if warm is not None:
         meta["init_from"] = load_warm_start(model, env, warm)
+    if cfg.imitate is not None:
+        from .imitation import clone
+        meta["imitate"] = clone(model, env, cfg.imitate, cfg.env_id, cfg.env_kwargs,
+                                ppo_kw.get("gamma", 0.99))
     write_config(run_dir, cfg, meta)
     callbacks = []
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
