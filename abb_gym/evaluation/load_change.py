@@ -51,7 +51,7 @@ knowing from detecting):
 position over the ``window`` before ``horizon`` after the change) [m], and the time off the
 operating speed [s].  :func:`summarise` gives means with 95 % intervals, paired differences,
 the gap ``(hold - oracle) / hold`` and the share of it the rule closes, with paired bootstrap
-intervals (:func:`scipy.stats.bootstrap`).
+intervals.
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ from ..physics import model as mdl
 from ..physics.laundry import resting_angles
 from ..physics.rotor import reference_amplitudes, static_deflection
 from ..physics.scene import Scene
-from .statistics import mean_interval, paired_interval
+from .statistics import LEVEL, mean_interval, paired_interval
 
 __all__ = ["STICK_FRICTION", "LoadChange", "Dip", "Timing", "DEFAULT_FAMILY", "PERTURBATION",
            "draw_cases", "settle", "change_load", "continue_run", "whirl_about_rest",
@@ -367,16 +367,25 @@ def tune_rule(rows: list[dict], time_weight: float = 0.0) -> tuple[float, str]:
     return best[1], best[2]
 
 
-def _bootstrap_ratio(num_a, num_b, den, seed: int = 0):
-    """Paired bootstrap 95 % interval of mean(num_a - num_b) / mean(den) (scipy)."""
-    from scipy.stats import bootstrap
+#: resamples of the paired bootstrap intervals of :func:`summarise`
+BOOTSTRAP_RESAMPLES = 5000
 
-    def stat(a, b, d, axis=-1):
-        return np.mean(a - b, axis=axis) / np.mean(d, axis=axis)
 
-    res = bootstrap((num_a, num_b, den), stat, paired=True, vectorized=True,
-                    n_resamples=5000, method="percentile", random_state=seed)
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+def _bootstrap_ratio(a, b, den, seed: int = 0) -> tuple[float, float]:
+    """Paired percentile bootstrap interval (:data:`~abb_gym.evaluation.statistics.LEVEL`) of
+    ``mean(a - b) / mean(den)``: the cases are drawn with replacement, the same cases for all
+    three arrays.  A resample whose ``mean(den)`` is 0 (possible with few cases) has no ratio
+    and is left out, which ``scipy.stats.bootstrap`` cannot do (it returns NaN bounds then)."""
+    a, b, den = (np.asarray(v, float) for v in (a, b, den))
+    idx = np.random.default_rng(seed).integers(0, len(a), size=(BOOTSTRAP_RESAMPLES, len(a)))
+    num = (a[idx] - b[idx]).mean(axis=1)
+    d = den[idx].mean(axis=1)
+    ratio = num[d != 0] / d[d != 0]
+    if ratio.size == 0:
+        return math.nan, math.nan
+    tail = 50.0 * (1.0 - LEVEL)
+    low, high = np.percentile(ratio, [tail, 100.0 - tail])
+    return float(low), float(high)
 
 
 def summarise(rows: list[dict], threshold: float, reaction: str) -> dict:
@@ -403,8 +412,9 @@ def summarise(rows: list[dict], threshold: float, reaction: str) -> dict:
            "oracle_rerun": mean_interval([r["oracle_rerun"] for r in rows], nonnegative=True),
            "fixed": {k: mean_interval([r["residual"][k] for r in rows], nonnegative=True)
                      for k in rows[0]["residual"]}}
-    gap = float(np.mean(res["hold"] - res["oracle"]) / np.mean(res["hold"]))
-    closed = float(np.mean(res["hold"] - res["rule"]) / np.mean(res["hold"] - res["oracle"]))
+    gain = float(np.mean(res["hold"] - res["oracle"]))
+    gap = gain / float(np.mean(res["hold"]))
+    closed = float(np.mean(res["hold"] - res["rule"])) / gain if gain > 0 else math.nan
     out["gap"] = {"mean": gap}
     out["rule_closes"] = {"mean": closed}
     if len(rows) >= 2:
