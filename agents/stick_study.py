@@ -375,7 +375,9 @@ def write_page(path: Path, figure: Path, scene, args, summary, rows, train_rule,
               f"Wall time {cost['wall']:.0f} s; {cost['cpu']:.0f} s of CPU time in the case "
               f"tasks ({cost['executor']}); load average {cost['load_before']:.1f} before and "
               f"{cost['load_after']:.1f} after, on {os.cpu_count()} cores shared with other "
-              f"jobs.  The per-case numbers are in `{path.with_suffix('.csv').name}`.", ""]
+              f"jobs.  The per-case numbers are in `{path.with_suffix('.csv').name}` "
+              f"(residuals) and `{path.with_suffix('.json').name}` (every case, reaction and "
+              f"time).", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     with replacing(path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines))
@@ -449,6 +451,15 @@ def main(argv=None) -> int:
                 "balancer_off_m": r["balancer_off"], "oracle_rerun_m": r["oracle_rerun"],
                 **{f"residual_m[{k}]": v for k, v in r["residual"].items()}} for r in rows],
               out.with_suffix(".csv"))
+    import json
+    from dataclasses import asdict
+
+    from abb_gym._files import replacing
+    with replacing(out.with_suffix(".json"), "w", encoding="utf-8") as fh:
+        json.dump({"scene": scene.to_dict(), "timing": asdict(timing),
+                   "family": [asdict(d) for d in lc.DEFAULT_FAMILY],
+                   "rule": {"threshold_m": threshold, "reaction": reaction},
+                   "train": train, "test": rows, "half_step": fine}, fh)
     cost = {"command": "python agents/stick_study.py " + shlex.join(argv if argv is not None
                                                                     else sys.argv[1:]),
             "wall": time.perf_counter() - start,

@@ -178,3 +178,28 @@ def test_paired_bootstrap_interval_agrees_with_scipy():
     assert mine[0] == pytest.approx(ref.low, abs=0.01)
     assert mine[1] == pytest.approx(ref.high, abs=0.01)
     assert mine[1] - mine[0] > 0.05
+
+
+@pytest.mark.slow
+def test_stick_study_script_writes_its_page(tmp_path):
+    """``agents/stick_study.py`` (a repository tool) end to end on one training and one test
+    case: the page with its table, verdict and command, the figure, the CSV and the JSON."""
+    import importlib.util
+    import json
+    from pathlib import Path
+    script = Path(__file__).resolve().parents[1] / "agents" / "stick_study.py"
+    if not script.is_file():
+        pytest.skip("needs the checkout's agents/")
+    spec = importlib.util.spec_from_file_location("stick_study", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    page = tmp_path / "stick.md"
+    assert module.main(["--cases", "2", "--train-cases", "1", "--check-step", "1",
+                        "--workers", "1", "--out", str(page)]) == 0
+    text = page.read_text()
+    assert "| no reaction (hold the speed) |" in text and "**Verdict:" in text
+    assert "python agents/stick_study.py --cases 2 --train-cases 1" in text
+    assert page.with_suffix(".png").stat().st_size > 20_000
+    data = json.loads(page.with_suffix(".json").read_text())
+    assert len(data["test"]) == 2 and len(data["train"]) == 1 and len(data["half_step"]) == 1
+    assert len(page.with_suffix(".csv").read_text().splitlines()) == 3
