@@ -227,14 +227,15 @@ def _mean_over(trajectory, start: float, end: float) -> float:
     return float(np.mean(w[keep]))
 
 
-#: The reactions the rule and the oracle choose from: dip speeds [rad/s] below the washer's
-#: critical speeds (12: the balls go to the heavy side and pass both resonances again), between
-#: them (18), just above (25, 35) and up to where gravity's once-per-revolution pull
-#: g / (R w^2) falls below mu_s (97 rad/s with the study's friction; 105 stays above it), each
-#: with no hold and a 5 s hold at the dip speed.
-DEFAULT_FAMILY = tuple(Dip(speed, hold) for speed in (12.0, 18.0, 25.0, 35.0, 50.0, 75.0,
-                                                       90.0, 105.0)
-                       for hold in (0.0, 5.0))
+#: The reactions the rule and the oracle choose from.  Deep dips, held 0 or 5 s: below both
+#: of the washer's critical speeds (12 rad/s: the balls go to the heavy side and pass both
+#: resonances again), just above them (25) and halfway (50).  Shallow dips, held 0, 5 or 15 s:
+#: around sqrt(g / (mu_s R)) = 97 rad/s, below which gravity's once-per-revolution pull beats
+#: the static limit and shakes the balls loose every turn (75, 85, 90, 95), and one that stays
+#: above it (105).
+DEFAULT_FAMILY = (tuple(Dip(speed, hold) for speed in (12.0, 25.0, 50.0) for hold in (0.0, 5.0))
+                  + tuple(Dip(speed, hold) for speed in (75.0, 85.0, 90.0, 95.0, 105.0)
+                          for hold in (0.0, 5.0, 15.0)))
 #: [rad] added to ball k's angle (k = 1, 2, ...) for the oracle's re-run (:func:`run_case`)
 PERTURBATION = 1.0e-7
 
