@@ -264,6 +264,27 @@ def test_stick_holds_a_ball_below_the_static_limit_and_releases_it_above(load, m
         assert np.abs(tr.ball_speeds).max() * scene.race_radius < 2e-6
 
 
+@pytest.mark.parametrize("load, moves", [(0.5, False), (0.9, False), (1.1, True), (1.5, True)])
+def test_stick_with_the_load_change_study_friction(load, moves):
+    """The friction of the load-change study (abb_gym.evaluation.load_change.STICK_FRICTION:
+    mu_k 1e-3, mu_s 4e-3, u_reg 1e-5 m/s, u_str 1e-3 m/s), whose wider tanh band lets a held
+    ball creep faster than above: held, it moves no further than the creep speed
+    u_reg atanh(load) allows in 2 s; released, it slides at least ten times that far."""
+    from abb_gym.evaluation.load_change import STICK_FRICTION
+    scene = stick_scene().replace(**STICK_FRICTION)
+    phi0 = -math.asin(load * STICK_FRICTION["friction_static"] * scene.race_radius
+                      / scene.race_eccentricity)
+    tr = simulate(scene, SpeedProfile.constant(100.0), 2.0, method="etdrk4",
+                  ball_angles0=[phi0], output_dt=0.01)
+    moved = abs(tr.ball_angles[-1, 0] - phi0)
+    creep = STICK_FRICTION["friction_regularization_speed"] * math.atanh(min(load, 0.9)) * 2.0 \
+        / scene.race_radius
+    if moves:
+        assert moved > 10 * creep
+    else:
+        assert moved < creep
+
+
 def test_etdrk4_resolves_the_breakaway_like_an_implicit_reference():
     """The steep stick law is stiff (mu_s N / u_reg): etdrk4 takes it exactly at its ordinary
     step (the secant rate of drag_rates) and lands where Radau does."""
