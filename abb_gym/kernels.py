@@ -92,13 +92,13 @@ def build(progress: bool = True) -> list[tuple[str, float]]:
     """Compile (or load) every kernel of :func:`warm_up_steps` into numba's cache; returns
     ``(label, seconds)`` per step."""
     import os
-    from tqdm import tqdm
+    from .progress import ProgressBar
     quiet = os.environ.get("ABB_GYM_QUIET")
     os.environ["ABB_GYM_QUIET"] = "1"  # the bar says what is compiling
     done = []
     try:
-        bar = tqdm(warm_up_steps(), desc="abb-gym kernels", unit="kernel",
-                   disable=not progress)
+        bar = ProgressBar(warm_up_steps(), desc="abb-gym kernels", unit="kernel",
+                          disable=not progress)
         for label, call in bar:
             bar.set_postfix_str(label)
             start = time.perf_counter()

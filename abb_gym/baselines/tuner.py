@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 import yaml
-from tqdm import tqdm
 
 from ..evaluation.evaluate import Chunk, check_inputs, run_chunk
 from ..envs import tasks
 from ..physics import rotor
+from ..progress import ProgressBar
 from . import profiles
 from .baseline_policy import BaselinePolicy, ClosedLoopPolicy
 from .families import FAMILY_NAMES, build_family, family_class
@@ -186,7 +186,7 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
              for a in range(0, len(cand), per) for options in option_sets]
     own = bar is None and progress
     if own:
-        bar = tqdm(total=len(cand), desc=f"{family}: candidates", unit="candidate")
+        bar = ProgressBar(total=len(cand), desc=f"{family}: candidates", unit="candidate")
     try:
         if executor is None:  # this process; the vector environment already uses every core
             parts = []
@@ -380,8 +380,8 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
         "env_kwargs": dict(env_kwargs or {}), "episodes": episodes,
         "seed": seed, "optimiser": _optimiser(cma.__version__, budget, restarts, start),
         "objective": OBJECTIVE, "families": {}}
-    with tqdm(total=budget * (1 + restarts) * len(families), desc=f"tune {scene_name}",
-              unit="candidate", disable=not progress) as bar:
+    with ProgressBar(total=budget * (1 + restarts) * len(families), desc=f"tune {scene_name}",
+                     unit="candidate", disable=not progress) as bar:
         for fam in families:
             bar.set_postfix_str(fam)
             best, default, n, runs = _restarted_search(
@@ -503,8 +503,8 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     if executor is not None:
         return executor.map(_search_machine, tasks,
                             desc=f"oracle {family} {scene_name}: machines")
-    with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
-              unit="candidate", disable=not progress) as bar:
+    with ProgressBar(total=budget * episodes, desc=f"oracle {family} {scene_name}",
+                     unit="candidate", disable=not progress) as bar:
         return [_search_machine(task, bar) for task in tasks]
 
 
@@ -563,8 +563,8 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
     rng = np.random.default_rng(seed + 7)
     swept = [fam for fam in families if profiles.search_space(family_class(fam))]
     rows = []
-    with tqdm(total=n * len(swept), desc=f"sweep {scene_name}", unit="candidate",
-              disable=not progress) as bar:
+    with ProgressBar(total=n * len(swept), desc=f"sweep {scene_name}", unit="candidate",
+                     disable=not progress) as bar:
         for fam in swept:
             bar.set_postfix_str(fam)
             d = len(profiles.search_space(family_class(fam)))
