@@ -1,0 +1,188 @@
+"""Workflows of engineers and RL users (issue 48, "A user guide, not a lab notebook"): one
+name per scene field everywhere, a scene template, stability-map axes with units, the
+drive limits of ``simulate``, ``abb-gym list`` and ``python -m abb_gym``."""
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from abb_gym import SceneError, load_scene
+from abb_gym.cli import main
+from abb_gym.configuration import bounds_text
+from abb_gym.physics.scene import _SPECS, FIELD_NAMES, resolve_field
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+# ------------------------------------------------------------- python -m abb_gym
+def test_python_dash_m_abb_gym_is_the_command_line():
+    out = subprocess.run([sys.executable, "-m", "abb_gym", "--version"], capture_output=True,
+                         text=True, timeout=300, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.startswith("abb-gym ")
+
+
+# ------------------------------------------------------------- one name per field
+def test_every_scene_field_is_named_by_its_yaml_path_and_its_flat_name():
+    for field, spec in _SPECS.items():
+        assert resolve_field(field) == (field,)
+        if spec.yaml:
+            assert resolve_field(spec.yaml) == (field,)
+    assert resolve_field("support.stiffness") == resolve_field("support_stiffness") \
+        == ("support_stiffness_x", "support_stiffness_y")
+
+
+@pytest.mark.parametrize("path, flat, value", [
+    ("balls.drag", "ball_drag", 2.0), ("rotor.mass", "rotor_mass", 0.2),
+    ("support.damping", "support_damping", 0.5), ("balls.count", "ball_count", 3),
+    ("fluid.drag_law", "fluid_drag_law", "linear"), ("drive.operating_speed",
+                                                     "drive_operating_speed", 150.0)])
+def test_load_scene_and_replace_take_either_name(path, flat, value):
+    by_path = load_scene("yoshida_odd", **{path: value})
+    assert by_path == load_scene("yoshida_odd", **{flat: value})
+    assert by_path == load_scene("yoshida_odd").replace(**{path: value})
+
+
+def test_a_field_given_by_both_names_or_by_an_unknown_name_is_one_clear_error():
+    with pytest.raises(SceneError, match="'ball_drag' is given twice"):
+        load_scene("yoshida_odd", ball_drag=1.0, **{"balls.drag": 2.0})
+    with pytest.raises(SceneError, match=r"unknown field.*'ball\.drag'.*did you mean "
+                                         r"'balls\.drag'"):
+        load_scene("yoshida_odd", **{"ball.drag": 2.0})
+
+
+def test_a_scene_file_may_name_a_field_flat_at_its_top_level(tmp_path):
+    path = tmp_path / "flat.yaml"
+    text = (REPO / "configs/scenes/yoshida_odd.yaml").read_text()
+    path.write_text(text + "ball_drag: 3.0\nsupport_damping: 0.4\n")
+    scene = load_scene(path)
+    assert scene.ball_drag == (3.0, 3.0) and scene.support_damping_y == 0.4
+
+
+def test_the_scene_docs_list_both_names_of_every_field():
+    import abb_gym.physics.scene as scene_module
+    doc = scene_module.__doc__
+    for field, spec in _SPECS.items():
+        if field == "name":
+            continue
+        row = next(line for line in doc.splitlines() if line.startswith(f"{spec.yaml or field} "))
+        assert f" {field} " in row
+
+
+def test_simulate_set_takes_the_yaml_path(capsys):
+    import json
+
+    def run(*extra):
+        code, out, err = _run(capsys, "simulate", "--t-end", "0.05", "--json", "-", *extra)
+        assert code == 0, err
+        data = json.loads(out)
+        return data["scene"], data["ball_angles"]
+
+    by_path, flat = run("--set", "balls.drag=2.5"), run("--set", "ball_drag=2.5")
+    assert by_path == flat and by_path[0]["ball_drag"] == [2.5, 2.5]
+    assert run()[1] != flat[1]
+
+
+def test_stability_map_axes_take_the_yaml_path_and_are_labelled_with_units():
+    from abb_gym.analysis import stability_map
+    from abb_gym.analysis.maps import axis_label
+    scene = load_scene("lu_hung_odd3")
+    kw = dict(workers=1, progress=False, n_members=5, n_balls=[3])
+    by_path = stability_map(scene, ("balls.drag", [0.5, 2.0]), ("Omega", [1.0, 2.0]), **kw)
+    flat = stability_map(scene, ("ball_drag", [0.5, 2.0]), ("Omega", [1.0, 2.0]), **kw)
+    for f in ("union_stable", "best"):
+        np.testing.assert_array_equal(by_path.field(3, f), flat.field(3, f))
+    fig = by_path.figure()
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "balls.drag (ball_drag) [N s/m]"
+    assert ax.get_ylabel() == "Omega = w / w_n [-]"
+    assert "undamped natural frequency w_n = sqrt(K/M)" in fig._supxlabel.get_text()
+    groups = stability_map(scene, ("zeta", [0.05, 0.1]), ("eta", [0.3, 0.5]), **kw)
+    note = groups.figure()._supxlabel.get_text()
+    # no axis changes K or M: w_n is the scene's
+    assert "every point at Omega = 2" in note and f"w_n = {scene.critical_speed:.4g} rad/s" \
+        in note
+    assert axis_label("zeta") == "zeta = C / (2 M w_n) [-]"
+    assert axis_label("race.eccentricity") == "race.eccentricity (race_eccentricity) [m]"
+
+
+# ------------------------------------------------------------- the scene template
+@pytest.mark.parametrize("base", ["yoshida_odd", "washer", "spannan_cfrp"])
+def test_the_scene_template_loads_as_its_base_scene(base):
+    from abb_gym.physics.scene_template import scene_template
+    text = scene_template("mine", base)
+    data = yaml.safe_load(text)
+    assert data["name"] == "mine"
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "mine.yaml"
+        path.write_text(text)
+        scene = load_scene(path)
+    ref = load_scene(base)
+    differ = [f.name for f in dataclasses.fields(scene) if getattr(scene, f.name)
+              != getattr(ref, f.name)]
+    assert differ == ["name", "description", "source"]
+
+
+def test_the_scene_template_comments_every_field_with_its_unit_and_range():
+    from abb_gym.physics.scene_template import scene_template
+    text = scene_template("mine")
+    lines = text.splitlines()
+    for field, spec in _SPECS.items():
+        if field in ("name", "description", "source"):
+            continue
+        section, _, key = spec.yaml.partition(".")
+        line = next(line for line in lines if line.startswith(f"  {key}:")
+                    and f"({field})" in line)
+        comment = line.split("#", 1)[1]
+        assert bounds_text(spec).replace(f" [{spec.unit}]", "") in comment
+        if spec.unit not in ("", "-"):
+            assert f"[{spec.unit}]" in comment
+
+
+def test_new_scene_writes_the_template_and_refuses_to_overwrite(tmp_path, capsys,
+                                                                 monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(capsys, "new-scene", "my_drive")
+    assert code == 0, err
+    path = tmp_path / "scenes" / "my_drive.yaml"
+    assert load_scene(path).name == "my_drive"
+    assert "wrote scenes/my_drive.yaml" in out
+    code, _, err = _run(capsys, "new-scene", "my_drive")
+    assert code == 2 and "exists; use --force" in err
+    code, _, err = _run(capsys, "--configs", str(tmp_path), "simulate", "--scene", "my_drive",
+                        "--t-end", "0.01")
+    assert code == 0, err
+    code, _, err = _run(capsys, "new-scene", "../escape")
+    assert code == 2 and "scene name must be" in err
+
+
+# ------------------------------------------------------------- abb-gym list
+def test_list_shows_scenes_presets_ids_baselines_and_agents(capsys):
+    from abb_gym import resources
+    from abb_gym.baselines.loader import BASELINE_NAMES
+    from abb_gym.envs.tasks import TASKS
+    code, out, err = _run(capsys, "list")
+    assert code == 0, err
+    for name in resources.names("scenes") + resources.names("envs"):
+        assert f"  {name} " in out
+    for env_id in TASKS:
+        assert f"  {env_id} " in out
+    for name in BASELINE_NAMES:
+        assert f"  baseline:{name} " in out
+    for name in resources.names("agents"):
+        assert f"  ppo:{name} " in out
+    code, only, _ = _run(capsys, "list", "scenes")
+    assert only.startswith("scenes") and "baseline:" not in only
