@@ -186,3 +186,136 @@ def test_list_shows_scenes_presets_ids_baselines_and_agents(capsys):
         assert f"  ppo:{name} " in out
     code, only, _ = _run(capsys, "list", "scenes")
     assert only.startswith("scenes") and "baseline:" not in only
+
+
+# ------------------------------------------------------------- the scene's drive limits
+SLOW = {"drive.operating_speed": 150.0}  # a machine rated for 150 rad/s
+
+
+def test_simulate_without_a_drive_runs_the_scenes_nominal_run_up():
+    import warnings
+
+    from abb_gym import SpeedProfile, simulate
+    scene = load_scene("yoshida_odd", **SLOW)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # within the limits: no warning
+        tr = simulate(scene)
+    # a ramp at half of drive.max_acceleration (80 rad/s^2), held at 150 rad/s, for the
+    # run-up (3.75 s) plus the 1 s settling window
+    assert tr.t[-1] == pytest.approx(150.0 / 40.0 + 1.0)
+    assert tr.rotor_speed.max() == pytest.approx(150.0)
+    same = simulate(scene, SpeedProfile.ramp(40.0, 150.0), 4.75)
+    np.testing.assert_array_equal(tr.states, same.states)
+
+
+def test_the_api_warns_about_a_drive_beyond_the_limits_and_raises_or_ignores_when_asked():
+    import warnings
+
+    from abb_gym import MotorDrive, SpeedProfile, simulate
+    from abb_gym.physics.drive_limits import DriveLimitWarning
+    scene = load_scene("yoshida_odd", **SLOW)
+    ramp = SpeedProfile.ramp(40.0)  # no hold: 320 rad/s at 8 s, what used to pass silently
+    with pytest.warns(DriveLimitWarning, match=r"320 rad/s, beyond the scene's "
+                                              r"drive\.operating_speed = 150 rad/s"):
+        warned = simulate(scene, ramp, 8.0, output_dt=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ignored = simulate(scene, ramp, 8.0, output_dt=0.05, drive_limits="ignore")
+    np.testing.assert_array_equal(warned.states, ignored.states)  # a warning, same run
+    with pytest.raises(ValueError, match=r"acceleration 400 rad/s\^2 is beyond the scene's "
+                                         r"drive\.max_acceleration = 80"):
+        simulate(scene, SpeedProfile.ramp(400.0, 100.0), 1.0, drive_limits="raise")
+    with pytest.warns(DriveLimitWarning, match=r"torque command 0\.01 N m is beyond"):
+        simulate(scene, MotorDrive.constant_torque(0.01), 0.01)
+    # a motor's speed is known after the run: 0.004 N m for 3 s passes 150 rad/s
+    with pytest.raises(ValueError, match=r"rotor speed reached .* beyond the scene's "
+                                         r"drive\.operating_speed = 150"):
+        simulate(scene, MotorDrive.constant_torque(0.004), 3.0, drive_limits="raise")
+    with pytest.raises(ValueError, match="drive_limits must be one of"):
+        simulate(scene, drive_limits="off")
+
+
+def test_the_simulate_command_defaults_to_the_drive_limits_and_refuses_beyond_them(capsys):
+    import json
+    set_slow = ["--set", "drive.operating_speed=150"]
+    code, out, err = _run(capsys, "simulate", *set_slow, "--json", "-", "--output-dt", "0.05")
+    assert code == 0, err
+    data = json.loads(out)
+    assert max(data["rotor_speed"]) == pytest.approx(150.0)  # before: 240 rad/s at 6 s
+    for argv, limit in ((["--operating-speed", "320"], "drive.operating_speed = 150"),
+                        (["--accel", "400", "--t-end", "0.1"], "drive.max_acceleration = 80"),
+                        (["--motor-torque", "0.01", "--t-end", "0.1"], "torque command"),
+                        (["--profile", "constant", "--speed", "200", "--t-end", "0.1"],
+                         "drive.operating_speed = 150")):
+        code, _, err = _run(capsys, "simulate", *set_slow, *argv)
+        assert code == 2 and limit in err and "--allow-beyond-drive-limits" in err, err
+        assert len(err.strip().splitlines()) == 1
+    code, _, err = _run(capsys, "simulate", *set_slow, "--operating-speed", "320",
+                        "--t-end", "0.5", "--allow-beyond-drive-limits")
+    assert code == 0, err
+    code, _, err = _run(capsys, "simulate", "--motor-torque", "0.004")
+    assert code == 2 and "--t-end" in err
+
+
+# ------------------------------------------------------------- the compile notice
+def test_a_long_compilation_of_any_kernel_of_the_package_is_announced(monkeypatch, capsys):
+    """numba's compilations at gym.make (the stiffness check) and reset (the observation)
+    used to run silently, 40 s of the 111 s of a cold start; every compilation of a package
+    function that runs past NOTICE_AFTER is announced, the first naming build-kernels."""
+    import threading
+    import time
+
+    import numba
+    from numba.core import event
+
+    import abb_gym._numba  # noqa: F401  (installs the listener)
+    from abb_gym import _compile_notice
+    monkeypatch.setattr(_compile_notice, "NOTICE_AFTER", 0.05)
+    monkeypatch.setattr(_compile_notice, "_hinted", threading.Event())
+    monkeypatch.delenv("ABB_GYM_QUIET", raising=False)
+
+    def probe(x):
+        return x + 1
+
+    def compiling(fn):
+        return event.trigger_event("numba:compile", data={"dispatcher": numba.njit(fn),
+                                                          "args": (), "return_type": None})
+
+    probe.__module__ = "abb_gym.probe"
+    with compiling(probe):
+        time.sleep(0.5)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("abb-gym: compiling abb_gym.probe.")
+    assert "abb-gym build-kernels compiles every kernel ahead of time" in err[0]
+    assert err[1].startswith("abb-gym: compiled abb_gym.probe.")
+    with compiling(probe):  # the hint once per process
+        time.sleep(0.5)
+    assert "build-kernels" not in capsys.readouterr().err
+    with compiling(probe):  # a quick one stays silent
+        pass
+    probe.__module__ = "someone_else"
+    with compiling(probe):  # another package's functions are its own business
+        time.sleep(0.5)
+    monkeypatch.setenv("ABB_GYM_QUIET", "1")
+    probe.__module__ = "abb_gym.probe"
+    with compiling(probe):
+        time.sleep(0.5)
+    time.sleep(0.2)
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.slow
+def test_a_cold_make_and_reset_say_that_they_compile(tmp_path):
+    """On an empty kernel cache, gym.make and reset each announce what they compile."""
+    code = ("import gymnasium as gym, abb_gym, sys\n"
+            "env = gym.make('abb_gym/RunUpSpeed-v0')\nprint('made', file=sys.stderr)\n"
+            "env.reset(seed=0)\nprint('reset', file=sys.stderr)\n")
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "ABB_GYM_QUIET"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=1800, cwd=REPO, env={**env, "NUMBA_CACHE_DIR": str(tmp_path)})
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stderr.splitlines()
+    made, reset = lines.index("made"), lines.index("reset")
+    assert any("compiling" in line and "build-kernels" in line for line in lines[:made])
+    assert any("compiling" in line for line in lines[made:reset])

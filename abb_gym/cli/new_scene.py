@@ -37,6 +37,8 @@ def run(args) -> int:
     from ..physics.scene_template import check_scene_name, scene_template
     from .outputs import output_file
     name = check_scene_name(args.name)
+    if args.out is not None and not args.out.strip():  # not read as "here"
+        raise ValueError(f"--out must be a file or folder path (got {args.out!r})")
     text = scene_template(name, args.base)
     out = Path("scenes") / f"{name}.yaml" if args.out is None else Path(args.out)
     if args.out is not None and (out.is_dir() or args.out.endswith(("/", "\\"))):
