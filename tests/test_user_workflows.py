@@ -319,3 +319,39 @@ def test_a_cold_make_and_reset_say_that_they_compile(tmp_path):
     made, reset = lines.index("made"), lines.index("reset")
     assert any("compiling" in line and "build-kernels" in line for line in lines[:made])
     assert any("compiling" in line for line in lines[made:reset])
+
+
+# ------------------------------------------------------------- the demo
+def test_the_demo_states_its_conclusion_and_labels_every_line(tmp_path, capsys, monkeypatch):
+    """The demo's table showed the dwell with the higher peak and nothing else, so a reader
+    concluded "dwell is worse"; it now says what the dwell does (both balls opposite the
+    imbalance soon after the critical speed, from both starts; without it one start never
+    gets there), in one line, and its figures name every line and reference line."""
+    from abb_gym import plots
+    legends = []
+    saved = plots.savefig
+
+    def keep_legends(fig, path, **kw):
+        legends.append([t.get_text() for ax in fig.axes if ax.get_legend()
+                        for t in ax.get_legend().get_texts()])
+        return saved(fig, path, **kw)
+
+    monkeypatch.setattr(plots, "savefig", keep_legends)
+    monkeypatch.setenv("ABB_GYM_PROGRESS", "lines")
+    code, out, err = _run(capsys, "demo", "--out", str(tmp_path))
+    assert code == 0, err
+    assert "demo kernels: 100% 2/2" in err  # the kernels it needs, with a bar
+    [line] = [line for line in out.splitlines() if line.startswith("conclusion:")]
+    # from the runs: the dwell brings both balls over from both starts (Yoshida Figs. 4.7,
+    # 4.9), the plain ramp leaves one ball of the 45/-45 start behind (Fig. 4.3)
+    assert "with the dwell both balls are opposite the imbalance" in line
+    with_dwell, without = line.split("without it from ")
+    assert "never" not in with_dwell and "never (a ball ends at -58 deg)" in without
+    assert "higher whirl peak" in line
+    assert "balls opposite the imbalance from [s]" in out
+    assert len(legends) == 2
+    for texts in legends:
+        assert {"rotor speed (left axis)", "whirl W_r / e (right axis)",
+                "critical speed 100 rad/s reached", "-180 deg: opposite the imbalance",
+                "balanced position (no residual imbalance): -241, -119 deg"} <= set(texts)
+        assert {"no dwell: ball 1", "no dwell: ball 2", "dwell 2.5-3.0 s: ball 1"} <= set(texts)
