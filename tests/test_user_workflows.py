@@ -355,3 +355,72 @@ def test_the_demo_states_its_conclusion_and_labels_every_line(tmp_path, capsys, 
                 "critical speed 100 rad/s reached", "-180 deg: opposite the imbalance",
                 "balanced position (no residual imbalance): -241, -119 deg"} <= set(texts)
         assert {"no dwell: ball 1", "no dwell: ball 2", "dwell 2.5-3.0 s: ball 1"} <= set(texts)
+
+
+# ------------------------------------------------------------- tuning to a specification
+def test_a_specification_is_parsed_with_one_line_errors():
+    from abb_gym.baselines.specification import Specification
+    spec = Specification.parse("peak_whirl<=20, run_up <= 5")
+    assert str(spec) == "peak_whirl<=20,run_up<=5,at_speed>=1"
+    assert str(Specification.parse("at_speed>=0.9")) == "at_speed>=0.9"
+    for text, message in (("peak<=3", "unknown metric 'peak'; allowed: peak_whirl"),
+                          ("peak_whirl<3", "not METRIC<=BOUND"),
+                          ("run_up<=soon", "must be a finite number [s]"),
+                          ("run_up<=nan", "finite"), ("", "requirements like"),
+                          ("run_up<=5,run_up<=4", "given twice")):
+        with pytest.raises(ValueError, match=re_escape(message)):
+            Specification.parse(text)
+
+
+def re_escape(text):
+    import re
+    return re.escape(text)
+
+
+def test_feasible_candidates_rank_before_infeasible_ones_whatever_their_residual():
+    from abb_gym.baselines.specification import Specification
+    spec = Specification.parse("peak_whirl<=20,run_up<=5")
+
+    def row(peak, run_up, residual, at_speed=1.0):
+        return {"peak_whirl": peak, "run_up_time": run_up, "residual_vibration": residual,
+                "at_speed": at_speed, "balanced": 0.0}
+
+    feasible_poor = row(19.0, 4.0, 2.0)
+    feasible_good = row(20.0, 5.0, 1.0)  # on the bounds: met
+    slightly_off = row(21.0, 4.0, 0.1)   # 5 % over one bound, a tiny residual
+    far_off = row(40.0, 8.0, 0.05)
+    not_at_speed = row(10.0, 4.0, 0.01, at_speed=0.5)
+    rows = [far_off, feasible_poor, not_at_speed, slightly_off, feasible_good]
+    assert sorted(rows, key=spec.key) == [feasible_good, feasible_poor, slightly_off,
+                                          not_at_speed, far_off]
+    assert spec.fitness(rows) == [4.0, 1.0, 3.0, 2.0, 0.0]
+    assert spec.violation(slightly_off) == pytest.approx(0.05)
+
+
+def test_tune_baselines_with_a_spec_minimises_the_residual_under_the_requirements(capsys):
+    """On yoshida_odd's training machines a faster ramp lowers the peak and the run-up time
+    and leaves more residual; the return prefers 40 rad/s^2 (peak 22.5 W_r/e).  Under
+    peak_whirl<=20 and run_up<=5 the tuner finds a ramp that meets both with less residual
+    than the fastest one (80 rad/s^2, which meets them too: residual 2.1 W_r/e)."""
+    from abb_gym.baselines import tuner
+    from abb_gym.baselines.specification import Specification
+    spec = Specification.parse("peak_whirl<=20,run_up<=5")
+    kw = dict(episodes=4, seed=20_000, preset="train")
+    result = tuner.tune("yoshida_odd", families=("ramp",), budget=10, spec=spec,
+                        progress=False, **kw)
+    ramp = result["families"]["ramp"]
+    assert ramp["feasible"] and all(r["met"] for r in ramp["requirements"].values())
+    assert ramp["mean_peak_whirl"] <= 20.0 and ramp["mean_run_up_time"] <= 5.0
+    [fastest, by_return] = tuner.evaluate_candidates("yoshida_odd", "ramp",
+                                                     [{"accel": 80.0}, {"accel": 40.0}], **kw)
+    assert spec.violation(fastest) == 0.0 and spec.violation(by_return) > 0.0
+    assert ramp["mean_residual_vibration"] < fastest["residual_vibration"]
+    assert "peak_whirl<=20,run_up<=5,at_speed>=1" in result["objective"]
+    code, out, err = _run(capsys, "tune-baselines", "--family", "ramp", "--budget", "3",
+                          "--episodes", "2", "--spec", "peak_whirl<=20,run_up<=5",
+                          "--dry-run", "--workers", "1")
+    assert code == 0, err
+    assert "ramp: meets peak_whirl<=20,run_up<=5,at_speed>=1" in out \
+        or "ramp: does NOT meet" in out
+    code, _, err = _run(capsys, "tune-baselines", "--spec", "peak<=3", "--dry-run")
+    assert code == 2 and "unknown metric 'peak'" in err
