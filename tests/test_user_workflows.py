@@ -424,3 +424,45 @@ def test_tune_baselines_with_a_spec_minimises_the_residual_under_the_requirement
         or "ramp: does NOT meet" in out
     code, _, err = _run(capsys, "tune-baselines", "--spec", "peak<=3", "--dry-run")
     assert code == 2 and "unknown metric 'peak'" in err
+
+
+# ------------------------------------------------------------- RL users: how to start
+def test_making_a_run_up_env_warns_once_how_a_policy_must_start_to_learn(monkeypatch):
+    """Plain SB3 PPO at the registered defaults never reaches the operating speed (return
+    -198 after 20k and 100k steps, at 0.01 and 0.05 s alike: abb_gym.envs.learning); a user
+    who makes the environment is told once why and what the shipped configs do."""
+    import warnings
+
+    import gymnasium as gym
+
+    from abb_gym.envs import learning
+    from abb_gym.envs.learning import LearningDefaultsWarning
+    monkeypatch.setattr(learning, "_advised", set())
+    with pytest.warns(LearningDefaultsWarning) as caught:
+        gym.make("abb_gym/RunUpSpeed-v0").close()
+    [w] = caught
+    assert w.filename == __file__  # points at the user's gym.make
+    text = str(w.message)
+    assert "abb_gym/RunUpSpeed-v0" in text and "BoundedMlpPolicy" in text \
+        and "action_mean_init=0.5" in text and "control_interval=0.05" in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym.make("abb_gym/RunUpSpeed-v0").close()  # once per process
+        gym.make("abb_gym/DwellProfile-v0").close()  # decides a whole profile: no advice
+        # abb-gym's own tools know: their environments are made silently
+        from abb_gym.evaluation.evaluate import make_env
+        make_env("abb_gym/RunUpTorque-v0", "yoshida_odd", "test", 2).close()
+    with pytest.warns(LearningDefaultsWarning, match="action_mean_init=0.3"):
+        gym.make_vec("abb_gym/RunUpTorque-v0", num_envs=2,
+                     vectorization_mode="vector_entry_point").close()
+
+
+def test_make_sb3_env_gives_the_advice_to_its_user(monkeypatch):
+    pytest.importorskip("stable_baselines3")
+    from abb_gym.envs import learning
+    from abb_gym.envs.learning import LearningDefaultsWarning
+    from abb_gym.rl import make_sb3_env
+    monkeypatch.setattr(learning, "_advised", set())
+    with pytest.warns(LearningDefaultsWarning) as caught:
+        make_sb3_env("abb_gym/RunUpSpeed-v0", 2).close()
+    assert caught[0].filename == __file__
