@@ -4,10 +4,12 @@ Every bar of abb-gym is a :class:`ProgressBar` (tests/test_progress.py checks th
 makes a tqdm bar of its own).  On a terminal it is tqdm's bar, redrawn in place.  When its
 output is not a terminal (a log file, a pipe, CI, a notebook's captured stderr), tqdm would
 write every redraw with a carriage return into one long line of the log, about a hundred
-updates per bar; there the bar writes plain lines instead, each ending in a newline: one
-when it starts, one at each quarter of its total, one at least every
-:data:`LINE_INTERVAL` seconds while it runs, and one when it closes (none twice for the same
-count).  A bar without a total writes its start, its time-based lines and its end.
+updates per bar; there the bar writes plain lines instead, each ending in a newline: one at
+each quarter of its total and one when it closes (none twice for the same count), and, while
+it runs, one when :data:`FIRST_LINE_AFTER` seconds passed without a line, the wait doubling
+after each such line up to :data:`LINE_INTERVAL` (an hour of work writes about a dozen
+lines).  A bar without a total writes the time-based lines and its end.  A bar that is done
+within seconds writes one line.
 
 ``ABB_GYM_PROGRESS=lines`` or ``=bar`` forces either form (``lines`` makes a terminal log
 readable, ``bar`` keeps tqdm's redraws in a pseudo-terminal that does not say it is one).
@@ -22,7 +24,9 @@ from tqdm import tqdm
 
 __all__ = ["ProgressBar", "LINE_INTERVAL", "LINE_FRACTIONS", "writes_lines"]
 
-#: [s] the longest a line-mode bar stays silent while it counts
+#: [s] a line-mode bar that wrote no line for this long writes one (then waits twice as long)
+FIRST_LINE_AFTER = 30.0
+#: [s] the longest a line-mode bar stays silent while it runs
 LINE_INTERVAL = 600.0
 #: the fractions of its total at which a line-mode bar writes a line (and at its close)
 LINE_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
@@ -54,6 +58,7 @@ class ProgressBar(tqdm):
         self._lines = writes_lines(kwargs.get("file")) and not kwargs.get("disable")
         self._line_n: float | None = None  # the count of the last line written
         self._line_t = time.monotonic()
+        self._wait = FIRST_LINE_AFTER
         self._next_fraction = 0
         if self._lines and kwargs.get("bar_format") is None:
             has_total = kwargs.get("total") is not None or _has_length(args, kwargs)
@@ -61,8 +66,6 @@ class ProgressBar(tqdm):
         super().__init__(*args, **kwargs)
 
     def _line_due(self) -> bool:
-        if self._line_n is None:
-            return True  # the start
         if self.n == self._line_n:
             return False
         if self.total:
@@ -73,7 +76,10 @@ class ProgressBar(tqdm):
                 due = True
             if due:
                 return True
-        return time.monotonic() - self._line_t >= LINE_INTERVAL
+        if time.monotonic() - self._line_t >= self._wait:
+            self._wait = min(2.0 * self._wait, LINE_INTERVAL)
+            return True
+        return False
 
     def _write_line(self) -> None:
         self.fp.write(self.__str__() + "\n")

@@ -117,14 +117,13 @@ def _count_to(total: int, file, **kwargs) -> str:
 
 def test_a_bar_writes_a_few_plain_lines_when_its_output_is_not_a_terminal(monkeypatch):
     """tqdm redraws a bar ~100 times with carriage returns, one long line in a log; in a file
-    the bar writes its start, each quarter and nothing twice."""
+    the bar writes each quarter and nothing twice."""
     import io
     monkeypatch.delenv("ABB_GYM_PROGRESS", raising=False)
     text = _count_to(200, io.StringIO())
     assert "\r" not in text
     lines = text.splitlines()
-    assert [line.split()[2] for line in lines] == ["0/200", "50/200", "100/200", "150/200",
-                                                   "200/200"]
+    assert [line.split()[2] for line in lines] == ["50/200", "100/200", "150/200", "200/200"]
     assert all(line.startswith("work:") for line in lines)
 
 
@@ -148,14 +147,33 @@ def test_the_environment_variable_forces_either_form(monkeypatch):
     assert "\r" not in _count_to(20, io.StringIO())
 
 
-def test_a_bar_without_a_total_writes_its_start_and_its_end(monkeypatch):
+def test_a_bar_without_a_total_writes_its_end_and_a_slow_one_says_it_runs(monkeypatch):
     import io
     from abb_gym.progress import ProgressBar
     monkeypatch.delenv("ABB_GYM_PROGRESS", raising=False)
     out = io.StringIO()
     for _ in ProgressBar(iter(range(30)), desc="open", file=out, mininterval=0):
         pass
-    assert [line.split()[1] for line in out.getvalue().splitlines()] == ["0", "30"]
+    assert [line.split()[1] for line in out.getvalue().splitlines()] == ["30"]
+    # a bar silent for FIRST_LINE_AFTER seconds writes a line, then waits twice as long
+    from abb_gym import progress
+
+    class Clock:
+        now = 0.0
+
+        def monotonic(self):
+            return self.now
+
+    clock = Clock()
+    monkeypatch.setattr(progress, "time", clock)
+    out = io.StringIO()
+    bar = ProgressBar(total=1000, desc="slow", file=out, mininterval=0)
+    for now in (31.0, 60.0, 92.0, 150.0):  # lines due at 30 s, then 60 s after the last
+        clock.now = now
+        bar.update(1)
+    bar.close()
+    assert [line.split()[2] for line in out.getvalue().splitlines()] == ["1/1000", "3/1000",
+                                                                         "4/1000"]
 
 
 def test_every_bar_of_the_package_is_the_one_progress_bar():
