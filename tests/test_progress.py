@@ -83,23 +83,29 @@ def test_sweep_without_progress_shows_no_bar(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
+def tiny_training(n_timesteps: int, n_steps: int):
+    """A training config of two environments and rollouts of ``n_steps`` each."""
+    from abb_gym.rl.config import TrainConfig
+    return TrainConfig.from_mapping("abb_gym/RunUpSpeed-v0", {
+        "n_envs": 2, "n_timesteps": n_timesteps, "policy": "BoundedMlpPolicy",
+        "n_steps": n_steps, "batch_size": n_steps, "n_epochs": 1,
+        "policy_kwargs": {"net_arch": [8]},
+        "env_kwargs": {"scene": SCENE, "preset": "train", "control_interval": 0.05},
+        "eval_freq": 0, "eval_episodes": 1, "checkpoint_freq": 0})
+
+
 def test_training_bar_stops_at_its_total(tmp_path, monkeypatch):
     """20 steps asked, rollouts of 2 x 8 = 16 steps: training runs 32 steps, the bar shows
     20/20 (SB3's own bar ends at 32/20)."""
     pytest.importorskip("stable_baselines3")
     import importlib
 
-    from abb_gym.rl.config import TrainConfig
     from abb_gym.rl.train import train
     bar = recording_tqdm()
     # the module (abb_gym.rl.train is also the name of the function)
     monkeypatch.setattr(importlib.import_module("abb_gym.rl.train"), "ProgressBar", bar)
-    cfg = TrainConfig.from_mapping("abb_gym/RunUpSpeed-v0", {
-        "n_envs": 2, "n_timesteps": 20, "policy": "BoundedMlpPolicy", "n_steps": 8,
-        "batch_size": 8, "n_epochs": 1, "policy_kwargs": {"net_arch": [8]},
-        "env_kwargs": {"scene": SCENE, "preset": "train", "control_interval": 0.05},
-        "eval_freq": 0, "eval_episodes": 1, "checkpoint_freq": 0})
-    res = train(cfg, seed=0, run_dir=tmp_path / "run", progress=True, final_eval=False)
+    res = train(tiny_training(20, 8), seed=0, run_dir=tmp_path / "run", progress=True,
+                final_eval=False)
     assert res.env_steps == 32
     [rec] = bar.bars
     assert rec["total"] == 20 and rec["n"] == 20 and rec["most"] == 20
@@ -197,7 +203,6 @@ def test_training_throughput_leaves_out_the_first_step_and_the_evaluations(tmp_p
     import time
 
     from abb_gym.rl import vec_env
-    from abb_gym.rl.config import TrainConfig
     from abb_gym.rl.train import train
     original = vec_env.NativeVecEnv.step_wait
     calls = []
@@ -209,12 +214,8 @@ def test_training_throughput_leaves_out_the_first_step_and_the_evaluations(tmp_p
         return original(self)
 
     monkeypatch.setattr(vec_env.NativeVecEnv, "step_wait", slow_first)
-    cfg = TrainConfig.from_mapping("abb_gym/RunUpSpeed-v0", {
-        "n_envs": 2, "n_timesteps": 64, "policy": "BoundedMlpPolicy", "n_steps": 16,
-        "batch_size": 16, "n_epochs": 1, "policy_kwargs": {"net_arch": [8]},
-        "env_kwargs": {"scene": SCENE, "preset": "train", "control_interval": 0.05},
-        "eval_freq": 0, "eval_episodes": 1, "checkpoint_freq": 0})
-    res = train(cfg, seed=0, run_dir=tmp_path / "run", progress=False, final_eval=False)
+    res = train(tiny_training(64, 16), seed=0, run_dir=tmp_path / "run", progress=False,
+                final_eval=False)
     assert res.env_steps == 64
     # the 62 steps after the first took at most the wall time less the 3 s
     assert res.training_steps_per_s >= (64 - 2) / (res.wall_time_s - 3.0)
