@@ -40,6 +40,10 @@ flush_if_sources_changed()
 import numba  # noqa: E402
 from numba import prange, typeof, types  # noqa: E402
 
+from ._compile_notice import install_listener  # noqa: E402
+
+install_listener()  # every long compilation of the package is announced
+
 __all__ = ["njit", "prange", "typeof", "types", "NOALIAS", "allow_overlap_checks"]
 
 

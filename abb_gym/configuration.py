@@ -205,20 +205,23 @@ def check(where: str, name: str, value: Any, spec: Spec,
     return v
 
 
-def fields_table(cls: Any, names: Iterable[str] | None = None, title: str = "field") -> str:
+def fields_table(cls: Any, names: Iterable[str] | None = None, title: str = "field",
+                 flat_names: bool = False) -> str:
     """A reStructuredText table of the declared fields of dataclass ``cls`` (or of a mapping
-    name -> Spec): name, unit, allowed range, meaning."""
+    name -> Spec): name, unit, allowed range, meaning; ``flat_names`` adds the field's flat
+    name beside its YAML path."""
     rows = []
     table = dict(cls) if isinstance(cls, Mapping) else specs(cls)
     for name in (names or table):
         s = table[name]
         rng = bounds_text(s).replace(f" [{s.unit}]", "") if s.unit not in ("", "-") \
             else bounds_text(s)
-        rows.append((s.yaml or name, s.unit or "-", rng, s.doc))
-    widths = [max(len(title), *(len(r[0]) for r in rows)), max(4, *(len(r[1]) for r in rows)),
-              max(5, *(len(r[2]) for r in rows)), max(7, *(len(r[3]) for r in rows))]
+        rows.append((s.yaml or name, *((name,) if flat_names else ()), s.unit or "-", rng,
+                     s.doc))
+    heads = (title, *(("flat name",) if flat_names else ()), "unit", "range", "meaning")
+    widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(heads)]
     rule = "  ".join("=" * w for w in widths)
-    head = "  ".join(h.ljust(w) for h, w in zip((title, "unit", "range", "meaning"), widths))
+    head = "  ".join(h.ljust(w) for h, w in zip(heads, widths))
     body = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     return "\n".join([rule, head.rstrip(), rule, *body, rule])
 

@@ -88,17 +88,19 @@ def warm_up_steps() -> list[tuple[str, Callable[[], None]]]:
     ]
 
 
-def build(progress: bool = True) -> list[tuple[str, float]]:
-    """Compile (or load) every kernel of :func:`warm_up_steps` into numba's cache; returns
-    ``(label, seconds)`` per step."""
+def build(progress: bool = True, steps: list[tuple[str, Callable[[], None]]] | None = None,
+          desc: str = "abb-gym kernels") -> list[tuple[str, float]]:
+    """Compile (or load) every kernel of ``steps`` (default :func:`warm_up_steps`: all of
+    them) into numba's cache, with a bar named ``desc``; returns ``(label, seconds)`` per
+    step."""
     import os
-    from tqdm import tqdm
+    from .progress import ProgressBar
     quiet = os.environ.get("ABB_GYM_QUIET")
     os.environ["ABB_GYM_QUIET"] = "1"  # the bar says what is compiling
     done = []
     try:
-        bar = tqdm(warm_up_steps(), desc="abb-gym kernels", unit="kernel",
-                   disable=not progress)
+        bar = ProgressBar(warm_up_steps() if steps is None else steps, desc=desc,
+                          unit="kernel", disable=not progress)
         for label, call in bar:
             bar.set_postfix_str(label)
             start = time.perf_counter()

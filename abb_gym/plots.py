@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 
 from ._files import savefig  # noqa: E402
 from .physics.trajectory import Trajectory  # noqa: E402
@@ -16,20 +17,32 @@ from .physics.trajectory import Trajectory  # noqa: E402
 __all__ = ["plot_runup", "plot_runup_comparison", "short_label"]
 
 
-def _draw_runup(axes, tr: Trajectory, label: str | None, colour, critical: bool) -> None:
+def _draw_runup(axes, tr: Trajectory, label: str | None, colour) -> None:
     ax_speed, ax_balls = axes
     ax_whirl = ax_speed._abb_twin  # created once per figure
     ax_speed.plot(tr.t, tr.rotor_speed, color=colour, ls="--", lw=1.0)
     ax_whirl.plot(tr.t, tr.whirl_ratio, color=colour, lw=1.2, label=label)
     for i in range(tr.n_balls):
         ax_balls.plot(tr.t, np.degrees(tr.ball_angles[:, i]), color=colour, lw=1.2,
-                      ls=("-", ":", "-.", (0, (5, 1)), (0, (3, 1, 1, 1)))[i % 5],
+                      ls=BALL_STYLES[i % len(BALL_STYLES)],
                       label=f"{label + ': ' if label else ''}ball {i + 1}")
-    if critical:
-        for ax in (ax_speed, ax_balls):
-            crossing = np.nonzero(tr.rotor_speed >= tr.scene.critical_speed)[0]
-            if crossing.size:
-                ax.axvline(tr.t[crossing[0]], color="0.6", lw=0.8, ls=":")
+
+
+#: line styles of balls 1, 2, ... in panel (b)
+BALL_STYLES = ("-", ":", "-.", (0, (5, 1)), (0, (3, 1, 1, 1)))
+REFERENCE = {"color": "0.45", "lw": 0.8}  # the reference lines: grey, thin
+
+
+def _critical_crossing(axes, tr: Trajectory) -> Line2D | None:
+    """A dotted vertical line where the first run's speed reaches the critical speed, in both
+    panels; its legend entry (None if the run never reaches it)."""
+    crossing = np.nonzero(tr.rotor_speed >= tr.scene.critical_speed)[0]
+    if not crossing.size:
+        return None
+    for ax in axes:
+        ax.axvline(tr.t[crossing[0]], ls=":", **REFERENCE)
+    return Line2D([], [], ls=":", **REFERENCE,
+                  label=f"critical speed {tr.scene.critical_speed:.4g} rad/s reached")
 
 
 def _figure(title: str, wide: bool = False):
@@ -42,15 +55,33 @@ def _figure(title: str, wide: bool = False):
     ax_balls.set_title("(b) ball angles relative to the rotor, from the imbalance")
     ax_balls.set_ylabel("ball angle theta_b [deg]")
     ax_balls.set_xlabel("time t [s]")
-    ax_balls.axhline(-180.0, color="k", lw=0.6)
-    ax_balls.axhline(-540.0, color="k", lw=0.3)
     fig.suptitle(title)
     return fig, (ax_speed, ax_balls)
 
 
-def plot_runup(tr: Trajectory, path: str | Path, title: str | None = None) -> Path:
+def _ball_references(ax, balanced, low: float) -> list:
+    """The reference lines of panel (b) and their legend entries: -180 deg (opposite the
+    imbalance), -540 deg when the angles go that low, and the balanced position(s)."""
+    handles = [Line2D([], [], color="k", lw=0.6, label="-180 deg: opposite the imbalance")]
+    ax.axhline(-180.0, color="k", lw=0.6)
+    if low < -400.0:
+        ax.axhline(-540.0, color="k", lw=0.3)
+        handles.append(Line2D([], [], color="k", lw=0.3,
+                              label="-540 deg: the same, one revolution behind"))
+    if balanced is not None and len(balanced):
+        degrees = np.degrees(np.asarray(balanced, float))
+        for angle in degrees:
+            ax.axhline(angle, ls="--", **REFERENCE)
+        handles.append(Line2D([], [], ls="--", **REFERENCE,
+                              label="balanced position (no residual imbalance): "
+                                    + ", ".join(f"{a:.0f}" for a in degrees) + " deg"))
+    return handles
+
+
+def plot_runup(tr: Trajectory, path: str | Path, title: str | None = None,
+               balanced=None) -> Path:
     """Thesis-style time histories of one run (Yoshida Figs. 4.x (a) and (c)) to a PNG."""
-    return plot_runup_comparison({"": tr}, path, title)
+    return plot_runup_comparison({"": tr}, path, title, balanced=balanced)
 
 
 def short_label(name: str, limit: int = 24) -> str:
@@ -59,11 +90,14 @@ def short_label(name: str, limit: int = 24) -> str:
 
 
 def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
-                          title: str | None = None) -> Path:
+                          title: str | None = None, balanced=None) -> Path:
     """Several runs of one scene on the same axes (e.g. policy versus baseline) to a PNG.
 
-    With several runs the legends sit beside the axes (never over the traces); labels longer
-    than 24 characters are shortened there, numbered, and given whole in a caption."""
+    Every line style and reference line is in a legend: dashed speed and solid whirl, the
+    critical-speed crossing of the first run (dotted), -180 deg (opposite the imbalance) and,
+    given ``balanced`` (ball angles [rad]), the balanced position (dashed).  With several
+    runs the legends sit beside the axes (never over the traces); labels longer than 24
+    characters are shortened there, numbered, and given whole in a caption."""
     runs = dict(runs)
     first = next(iter(runs.values()))
     several = len(runs) > 1 or any(runs)
@@ -75,18 +109,31 @@ def plot_runup_comparison(runs: Mapping[str, Trajectory], path: str | Path,
         if short != label:
             short = f"[{k + 1}] {short}"
             caption.append(f"[{k + 1}] {label}")
-        _draw_runup(axes, tr, short or None, colours[k % len(colours)], critical=(k == 0))
-    if several:
-        axes[0]._abb_twin.legend(loc="upper left", bbox_to_anchor=(1.08, 1.0), fontsize=8,
-                                 borderaxespad=0.0)
-        axes[1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
-                       borderaxespad=0.0)
-    else:
-        axes[1].legend(loc="lower left", fontsize=7, ncol=2)
-    if caption:  # supxlabel: constrained layout keeps room for it below the axes
-        fig.supxlabel("; ".join(caption), fontsize=7)
+        _draw_runup(axes, tr, short or None, colours[k % len(colours)])
+    styles = [Line2D([], [], color="0.3", ls="--", lw=1.0, label="rotor speed (left axis)"),
+              Line2D([], [], color="0.3", lw=1.2, label="whirl W_r / e (right axis)")]
+    crossing = _critical_crossing(axes, first)
+    if crossing is not None:
+        styles.append(crossing)
     lo = min(np.degrees(tr.ball_angles).min() for tr in runs.values())
     hi = max(np.degrees(tr.ball_angles).max() for tr in runs.values())
+    references = _ball_references(axes[1], balanced, lo)
+    runs_a, names_a = axes[0]._abb_twin.get_legend_handles_labels()
+    runs_b, names_b = axes[1].get_legend_handles_labels()
+    handles_a, handles_b = runs_a + styles, runs_b + references
+    if several:
+        axes[0]._abb_twin.legend(handles=handles_a, loc="upper left", fontsize=8,
+                                 bbox_to_anchor=(1.08, 1.0), borderaxespad=0.0)
+        axes[1].legend(handles=handles_b, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                       fontsize=7, borderaxespad=0.0)
+    else:
+        axes[0]._abb_twin.legend(handles=handles_a, loc="upper left", fontsize=7)
+        axes[1].legend(handles=handles_b, loc="lower left", fontsize=7, ncol=2)
+    if caption:  # supxlabel: constrained layout keeps room for it below the axes
+        fig.supxlabel("; ".join(caption), fontsize=7)
+    if balanced is not None and len(balanced):  # the balanced position stays in view
+        lo = min(lo, float(np.degrees(np.min(balanced))))
+        hi = max(hi, float(np.degrees(np.max(balanced))))
     axes[1].set_ylim(min(-200.0, lo - 20), max(30.0, hi + 20))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -32,6 +32,13 @@ def pytest_addoption(parser):
                      help="run the wheel test (build, install in a fresh venv elsewhere)")
 
 
+def pytest_configure(config):
+    # the tests make RunUp* environments from their own code, as a user would, and know how
+    # a policy must start (tests/test_user_workflows.py checks the warning itself)
+    config.addinivalue_line("filterwarnings",
+                            "ignore::abb_gym.envs.learning.LearningDefaultsWarning")
+
+
 def pytest_collection_modifyitems(config, items):
     skip_slow = pytest.mark.skip(reason="slow: opt in with --runslow (make test-slow)")
     skip_wheel = pytest.mark.skip(reason="wheel: opt in with --runwheel (make test does)")

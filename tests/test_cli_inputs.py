@@ -150,6 +150,8 @@ _EMPTY_PATH_CASES = [
     (["evaluate", "--policy", "baseline:ramp", "--resume-dir", ""], "--resume-dir"),
     (["tune-baselines", "--resume-dir", " "], "--resume-dir"),
     (["study", "settling", "--resume-dir", ""], "--resume-dir"),
+    (["new-scene", "x", "--out", ""], "--out"),
+    (["new-scene", "x", "--out", " "], "--out"),
 ] + ([(["train", "--config", "runup_speed_yoshida_odd", "--out", ""], "--out"),
       (["train", "--config", "runup_speed_yoshida_odd", "--tensorboard-log", ""],
        "--tensorboard-log"),
@@ -245,7 +247,9 @@ def test_every_drive_takes_its_own_options():
                  ["--profile", "dwell", "--dwell-speed", "50", "--dwell-time", "0.01",
                   "--dwell-accel", "1", "--accel", "40"],
                  ["--profile", "constant", "--speed", "50"],
-                 ["--limited-power", "1e-3", "--speed", "50"], ["--motor-torque", "0.01"]):
+                 ["--limited-power", "1e-3", "--speed", "50"],
+                 # within the scene's drive.torque_limit, 5e-3 N m (tests/test_user_workflows)
+                 ["--motor-torque", "0.004"]):
         code, out, err = run(["simulate", "--t-end", "0.01", *argv])
         assert code == 0, (argv, err)
 
@@ -395,7 +399,7 @@ def test_the_training_report_prints_no_nan(capsys):
     summary = {"episodes": 4, "return": metric, "at_speed": metric, "run_up_time": metric,
                "balanced": metric, "residual_vibration": empty}
     _report(SimpleNamespace(run_dir="r", wall_time_s=1.0, env_steps=10, env_steps_per_s=10.0,
-                            evaluation=summary))
+                            evaluation=summary, training_steps_per_s=12.0))
     out = capsys.readouterr().out
     assert "nan" not in out and "residual vibration n/a (no episode settled)" in out
 

@@ -135,3 +135,35 @@ def test_missing_video_extra_names_the_pip_command(tmp_path, capsys, monkeypatch
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "pip install 'abb-gym[video]'" in lines[0], err
     assert not out.exists() and not tmp_path.joinpath("v").exists()
+
+
+def test_the_render_bar_ends_at_the_steps_the_episode_ran(tmp_path, monkeypatch):
+    """The bar's total is the longest episode (12 steps here); an episode that ends after 7
+    ends the bar at 7/7 (before: 7/12, and the bar of a 700-step episode read 850)."""
+    from abb_gym import progress
+    from abb_gym.evaluation import evaluate, video
+
+    class Env:
+        def render(self):
+            return [np.zeros((36, 72, 3), np.uint8)]
+
+    def seven_steps(chunk, on_step=None):
+        on_step(Env(), np.zeros(1, bool))
+        for k in range(1, 8):
+            on_step(Env(), np.array([k == 7]))
+        return [{"return": 0.0}], {}
+
+    bars = []
+
+    class Bar(progress.ProgressBar):
+        def close(self):
+            if not self.disable:  # (tqdm closes again when the bar is collected)
+                bars.append((self.n, self.total))
+            super().close()
+
+    monkeypatch.setattr(evaluate, "run_chunk", seven_steps)
+    monkeypatch.setattr(progress, "ProgressBar", Bar)
+    res = video.render_episode("abb_gym/RunUpSpeed-v0", "yoshida_odd", "baseline:ramp",
+                               tmp_path / "x.gif", steps=12, every=5, fps=10)
+    assert res["steps"] == 7
+    assert bars == [(7, 7)]

@@ -3,22 +3,7 @@
 Lu & Hung scale lengths by the disk eccentricity ``e``, time by ``w_n = sqrt(K/M)`` and masses
 by the total mass ``M``.  Their groups, plus three extensions that the shipped scenes need:
 
-==================  ===========================================================  ============
-group               definition                                                   range
-==================  ===========================================================  ============
-n_balls             number of balls n                                            1 .. 64
-eta                 m_b d / (m_d e): one ball's imbalance over the rotor's       (0, 1e6]
-                    (one number, or one per ball)
-mu                  m_d / M: imbalanced disk mass over the total mass            [1e-6, 1e6]
-delta               d / e: race radius over the disk eccentricity                [1e-6, 1e9]
-zeta                C / (2 M w_n): support damping ratio (stationary damper)     [0, 1e6]
-zeta_b              C_B / (2 m_b w_n): race damping ratio of a ball (one or      [0, 1e6]
-                    one per ball); the drag torque is C_B d^2 beta'
-spin                J_b / (m_b r_b^2): rolling-ball spin inertia factor (0 for   [0, 1e3]
-                    Lu & Hung's point masses, 0.4 for a solid rolling sphere)
-race_eccentricity   E / e: offset of the race centre from the rotor centre       [0, 1e6]
-race_angle          gamma [rad]: direction of that offset, from the imbalance    finite
-==================  ===========================================================  ============
+{table}
 
 The ranges keep the linear algebra finite: beyond them (``mu = 5e-324``, ``zeta = 1e308``)
 the eigenvalue problems are singular or overflow, so a group outside its range is a
@@ -50,7 +35,7 @@ import numpy as np
 
 from ..physics.scene import Scene
 
-__all__ = ["Groups", "GROUP_FIELDS"]
+__all__ = ["Groups", "GROUP_FIELDS", "DEFINITIONS"]
 
 # name -> (lower bound, lower bound inclusive, per-ball allowed)
 # group -> (lower bound, lower bound included, upper bound (included), one value per ball)
@@ -66,6 +51,54 @@ _BOUNDS = {
 }
 MAX_BALLS = 64  # the largest ball_count of a Scene
 GROUP_FIELDS = ("n_balls",) + tuple(_BOUNDS)
+
+#: name -> (formula, unit, meaning) of every group, of ``eta_total`` and of the speed ratio
+#: ``Omega`` (the module docstring's table and the stability maps' axis labels)
+DEFINITIONS = {
+    "n_balls": ("n", "-", "number of balls"),
+    "eta": ("m_b d / (m_d e)", "-", "one ball's imbalance over the rotor's (one number, or "
+                                    "one per ball)"),
+    "mu": ("m_d / M", "-", "imbalanced disk mass over the total mass"),
+    "delta": ("d / e", "-", "race radius over the disk eccentricity"),
+    "zeta": ("C / (2 M w_n)", "-", "support damping ratio (stationary damper)"),
+    "zeta_b": ("C_B / (2 m_b w_n)", "-", "race damping ratio of a ball (one or one per ball); "
+                                        "the drag torque is C_B d^2 beta'"),
+    "spin": ("J_b / (m_b r_b^2)", "-", "rolling-ball spin inertia factor (0 for Lu & Hung's "
+                                      "point masses, 0.4 for a solid rolling sphere)"),
+    "race_eccentricity": ("E / e", "-", "offset of the race centre from the rotor centre"),
+    "race_angle": ("gamma", "rad", "direction of that offset, from the imbalance"),
+    "eta_total": ("sum eta_i", "-", "the balls' total imbalance over the rotor's"),
+    "Omega": ("w / w_n", "-", "rotor speed over the undamped natural frequency "
+                              "w_n = sqrt(K/M)"),
+}
+
+
+def _range_text(name: str) -> str:
+    if name == "n_balls":
+        return f"1 .. {MAX_BALLS}"
+    lo, incl, hi, _ = _BOUNDS[name]
+    if lo is None:
+        return "finite"
+    return f"{'[' if incl else '('}{lo:g}, {hi:g}]"
+
+
+def _table() -> str:
+    import textwrap
+    rows = [(name, f"{DEFINITIONS[name][0]}: {DEFINITIONS[name][2]}"
+             + ("" if DEFINITIONS[name][1] == "-" else f" [{DEFINITIONS[name][1]}]"),
+             _range_text(name)) for name in GROUP_FIELDS]
+    widths = (18, 59, 14)
+    rule = "  ".join("=" * w for w in widths)
+    lines = [rule, "  ".join(h.ljust(w) for h, w in zip(("group", "definition", "range"),
+                                                          widths)).rstrip(), rule]
+    for name, text, rng in rows:
+        wrapped = textwrap.wrap(text, widths[1])
+        lines.append(f"{name:<18}  {wrapped[0]:<59}  {rng}".rstrip())
+        lines.extend(f"{'':<18}  {more}".rstrip() for more in wrapped[1:])
+    return "\n".join([*lines, rule])
+
+
+__doc__ = __doc__.replace("{table}", _table())
 
 
 def _check(name: str, value: Any) -> float:

@@ -10,8 +10,15 @@ Axes are named by
 * ``Omega`` - speed ratio w/w_n (the speed of every point when no axis is Omega: ``omega``),
 * a dimensionless group (:data:`abb_gym.analysis.groups.GROUP_FIELDS`, e.g. ``zeta``,
   ``zeta_b``, ``eta``, ``mu``, ``delta``) or ``eta_total``,
-* or, when the base is a :class:`~abb_gym.physics.scene.Scene`, a scene field
-  (e.g. ``ball_drag``, ``support_damping``), applied to the scene before it is converted.
+* or, when the base is a :class:`~abb_gym.physics.scene.Scene`, a scene field by either of
+  its names (``ball_drag`` or ``balls.drag``, ``support_damping`` or ``support.damping``:
+  :data:`abb_gym.physics.scene.FIELD_NAMES`), applied to the scene before it is converted.
+  ``race_eccentricity`` is the group E/e; the scene's race offset [m] is ``race.eccentricity``.
+
+The figure labels each axis with its definition and unit (a group's formula, e.g.
+``zeta = C / (2 M w_n) [-]``; a scene field's unit, e.g. ``balls.drag (ball_drag) [N s/m]``)
+and explains ``Omega`` below the axes: the rotor speed over the undamped natural frequency
+``w_n = sqrt(K/M)``, with its value in rad/s when the base is a scene and no axis changes it.
 
 Work runs on the executor layer (:mod:`abb_gym.execution`): local processes by default, or a
 local Ray instance or a Ray cluster; one task per (point, ball count), results in task order,
@@ -37,12 +44,12 @@ import numpy as np
 
 from .._files import replacing, savefig
 from ..execution import Executor
-from ..physics.scene import Scene
-from .groups import GROUP_FIELDS, MAX_BALLS, Groups
+from ..physics.scene import Scene, field_spec
+from .groups import DEFINITIONS, GROUP_FIELDS, MAX_BALLS, Groups
 from .rotating_frame import DEFAULT_TOL, _check_omega, check_family_size, family_stability
 
 __all__ = ["StabilityMap", "stability_map", "resolve_groups", "onset_speed", "MAP_FIELDS",
-           "MAX_MAP_TASKS", "check_map_size"]
+           "MAX_MAP_TASKS", "check_map_size", "axis_label"]
 
 #: Most tasks (grid points x ball counts) of one map: the task list is built before anything
 #: runs (a 1e9-point grid would hang there, and its arrays take gigabytes); a default map has
@@ -82,6 +89,17 @@ def resolve_groups(base: Groups | Scene, settings: dict[str, float],
     return g, omega
 
 
+def axis_label(name: str) -> str:
+    """The axis label of map parameter ``name``: a group (or ``Omega``) with its formula and
+    unit, a scene field with its YAML path, flat name and unit."""
+    if name in DEFINITIONS:
+        formula, unit, _ = DEFINITIONS[name]
+        return f"{name} = {formula} [{unit}]"
+    field, spec = field_spec(name)
+    names = f"{spec.yaml} ({field})" if name in (field, spec.yaml) and spec.yaml else name
+    return f"{names} [{spec.unit or '-'}]"
+
+
 def _evaluate(task: tuple[Groups, float, int, float]) -> tuple:
     g, omega, n_members, tol = task
     fs = family_stability(g, omega, n_members, tol)
@@ -100,6 +118,9 @@ class StabilityMap:
     data: dict[int, dict[str, np.ndarray]]
     base_description: str = ""
     settings: dict[str, Any] = field(default_factory=dict)
+    #: w_n = sqrt(K/M) [rad/s] of a scene base that no axis changes (None: groups, or an
+    #: axis that changes it)
+    natural_frequency: float | None = None
 
     def field(self, n: int, name: str) -> np.ndarray:
         if n not in self.data:
@@ -127,16 +148,34 @@ class StabilityMap:
         return path
 
     def plot(self, path: str | os.PathLike, title: str | None = None) -> Path:
-        """PNG: shading = union-stable region of the first ball count (dark: no balanced state),
-        lines = union borders of every ball count (solid 3 balls, dashed 2, dotted others)."""
+        """PNG of :meth:`figure`."""
+        import matplotlib.pyplot as plt
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig = self.figure(title)
+        path = savefig(fig, path)
+        plt.close(fig)
+        return path
+
+    def omega_note(self) -> str:
+        """What ``Omega`` is, in words, with w_n in rad/s where one value holds."""
+        wn = (f"; here w_n = {self.natural_frequency:.4g} rad/s"
+              if self.natural_frequency else "")
+        return f"Omega = w / w_n: rotor speed over the undamped natural frequency " \
+               f"w_n = sqrt(K/M){wn}"
+
+    def figure(self, title: str | None = None):
+        """The map as a matplotlib figure: shading = union-stable region of the first ball
+        count (dark: no balanced state), lines = union borders of every ball count (solid 3
+        balls, dashed 2, dotted others); axes labelled with definitions and units
+        (:func:`axis_label`), ``Omega`` explained below them."""
         import matplotlib
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
         from matplotlib.lines import Line2D
 
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
+        fig, ax = plt.subplots(figsize=(6.4, 5.0), dpi=120, constrained_layout=True)
         n0 = self.n_balls[0]
         d0 = self.data[n0]
         shade = np.where(d0["exists"], np.where(d0["union_stable"], 2.0, 1.0), 0.0)
@@ -155,14 +194,15 @@ class StabilityMap:
                                linestyles=styles.get(n, ":"), linewidths=1.4)
                 handles.append(Line2D([], [], color="k", linestyle=styles.get(n, ":"),
                                       label=f"{n}-ball border"))
-        ax.set_xlabel(self.x_name)
-        ax.set_ylabel(self.y_name)
+        ax.set_xlabel(axis_label(self.x_name))
+        ax.set_ylabel(axis_label(self.y_name))
         ax.set_title(title or f"Balanced-state stability ({self.base_description})", fontsize=9)
         ax.legend(handles=handles, fontsize=7, loc="best")
-        fig.tight_layout()
-        path = savefig(fig, path)
-        plt.close(fig)
-        return path
+        omega = self.settings.get("omega")
+        speed = "" if "Omega" in (self.x_name, self.y_name) or omega is None \
+            else f"every point at Omega = {omega:g}. "
+        fig.supxlabel(speed + self.omega_note(), fontsize=7)
+        return fig
 
 
 def _values(name: str, values: Sequence[float]) -> np.ndarray:
@@ -281,9 +321,13 @@ def stability_map(base: Groups | Scene, x: tuple[str, Sequence[float]],
     desc = base.name if isinstance(base, Scene) else \
         ", ".join(f"{k}={fmt(getattr(g0, k))}" for k in ("eta", "mu", "delta", "zeta", "zeta_b")
                   if k not in (xname, yname))
+    wn = None
+    if isinstance(base, Scene) and not ({xname, yname} - _GROUP_AXES - {"Omega"}):
+        wn = math.sqrt(base.support_stiffness_x / base.total_mass)
     return StabilityMap(x_name=xname, x_values=xv, y_name=yname, y_values=yv,
                         n_balls=n_balls, data=data, base_description=desc,
-                        settings={"omega": omega, "n_members": n_members, "tol": tol})
+                        settings={"omega": omega, "n_members": n_members, "tol": tol},
+                        natural_frequency=wn)
 
 
 def onset_speed(system: Groups | Scene, omega_min: float, omega_max: float,

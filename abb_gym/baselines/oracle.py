@@ -39,9 +39,9 @@ import math
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from ..evaluation.evaluate import EvaluationResult
+from ..progress import ProgressBar
 from .tuner import (ENV_ID, CandidateTask, _check_counts, _run_candidates, as_candidate,
                     ball_starts, return_score, tune_per_machine)
 
@@ -188,7 +188,7 @@ def balls_elsewhere(run: dict[str, Any], compare: dict[str, Any], draws: int = 4
     if executor is not None:
         runs = executor.map(_run_candidates, tasks, desc=f"{desc}: run-up pairs")
     else:
-        with tqdm(tasks, desc=desc, unit="run-up pair", disable=not progress) as bar:
+        with ProgressBar(tasks, desc=desc, unit="run-up pair", disable=not progress) as bar:
             runs = [_run_candidates(task) for task in bar]
     for m, row in enumerate(machines):
         scored = [[], []]

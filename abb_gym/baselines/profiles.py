@@ -42,6 +42,7 @@ from typing import Any, ClassVar
 
 from ..configuration import ConfigError, declare, specs
 from ..configuration import build as build_config
+from ..physics.drive_limits import nominal_acceleration
 from ..physics.drives import SpeedProfile
 from ..physics.scene import Scene
 
@@ -51,8 +52,9 @@ __all__ = ["FAMILIES", "Family", "build", "duration", "default_accel",
 
 
 def default_accel(scene: Scene) -> float:
-    """Half the drive's largest acceleration [rad/s^2] (Yoshida's 40 of 80 rad/s^2)."""
-    return 0.5 * scene.drive_max_acceleration
+    """Half the drive's largest acceleration [rad/s^2] (Yoshida's 40 of 80 rad/s^2): the
+    scene's nominal run-up, :func:`abb_gym.physics.drive_limits.nominal_acceleration`."""
+    return nominal_acceleration(scene)
 
 
 def default_dwell_time(scene: Scene) -> float:

@@ -12,7 +12,10 @@ native vector environments, chunked into executor tasks.
   family's default is always a candidate, so the result is never worse than the default on
   that set.  The result goes where ``out`` says (:func:`write_tuned`); a
   ``baselines/<scene>.yaml`` on the search path of :mod:`abb_gym.resources` is what
-  ``baseline:NAME`` policies then use.
+  ``baseline:NAME`` policies then use.  With a specification (``spec``,
+  :mod:`abb_gym.baselines.specification`) the objective is instead the least mean residual
+  vibration among the candidates that meet its requirements (peak whirl, run-up time, ...),
+  ranked feasibility first.
 * :func:`sweep` - the same families over their boxes on the **test** preset, as points (mean
   settled run-up time, mean residual vibration) for the speed-versus-accuracy chart.
 """
@@ -25,14 +28,15 @@ from typing import Any
 
 import numpy as np
 import yaml
-from tqdm import tqdm
 
 from ..evaluation.evaluate import Chunk, check_inputs, run_chunk
 from ..envs import tasks
 from ..physics import rotor
+from ..progress import ProgressBar
 from . import profiles
 from .baseline_policy import BaselinePolicy, ClosedLoopPolicy
 from .families import FAMILY_NAMES, build_family, family_class
+from .specification import Specification
 
 ENV_ID = tasks.DEFAULT_ENV_ID
 OBJECTIVE = "mean return on the preset (the environment's reward)"
@@ -186,7 +190,7 @@ def _evaluate_candidates(scene_name, family, candidates, episodes, seed, preset,
              for a in range(0, len(cand), per) for options in option_sets]
     own = bar is None and progress
     if own:
-        bar = tqdm(total=len(cand), desc=f"{family}: candidates", unit="candidate")
+        bar = ProgressBar(total=len(cand), desc=f"{family}: candidates", unit="candidate")
     try:
         if executor is None:  # this process; the vector environment already uses every core
             parts = []
@@ -232,17 +236,30 @@ def return_score(row: dict) -> float:
     return r if math.isfinite(r) else -math.inf
 
 
+def _rank_key(spec):
+    """How candidates rank, smaller first: by return (no ``spec``), or feasibility first
+    under ``spec`` (:meth:`~abb_gym.baselines.specification.Specification.key`)."""
+    return (lambda row: (-return_score(row),)) if spec is None else spec.key
+
+
+def _fitness(spec, rows: list[dict]) -> list[float]:
+    """What CMA-ES minimises for one generation's rows."""
+    if spec is None:
+        return [-r["return"] if math.isfinite(r["return"]) else 1e9 for r in rows]
+    return spec.fitness(rows)
+
+
 def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                 popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
                 executor, bar, env_kwargs, start: dict | None = None,
-                x0: np.ndarray | None = None, run: int = 0, option_sets=((),)
+                x0: np.ndarray | None = None, run: int = 0, option_sets=((),), spec=None
                 ) -> tuple[dict, dict, int]:
     """CMA-ES over the unit box from its centre; or from ``start`` (parameters, also a
     candidate, with a smaller initial step: a refinement); or from ``x0`` (a point of the unit
     box, itself the first candidate, with the full initial step: a restart).  ``run`` numbers
-    the searches of one tuning and seeds each one's CMA-ES differently.  Returns the best row,
-    the first candidate's row (the family's default, or the restart point) and how many
-    candidates ran."""
+    the searches of one tuning and seeds each one's CMA-ES differently; ``spec``: rank by a
+    specification instead of the return.  Returns the best row, the first candidate's row
+    (the family's default, or the restart point) and how many candidates ran."""
     import cma
 
     space = profiles.search_space(family_class(family))
@@ -254,7 +271,8 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
                                 executor, env_id=env_id, env_kwargs=env_kwargs, bar=bar,
                                 option_sets=option_sets)
     default = rows[0]
-    best = max(rows, key=return_score)
+    rank = _rank_key(spec)
+    best = min(rows, key=rank)
     evaluations = len(rows)
     sigma0 = 0.3
     if x0 is None and start is None:
@@ -281,11 +299,10 @@ def _cma_search(family: str, scene_name: str, scales: dict[str, float], budget: 
                                         executor, env_id=env_id, env_kwargs=env_kwargs,
                                         bar=bar, option_sets=option_sets)
             if len(xs) == es.popsize:
-                es.tell(xs, [-r["return"] if math.isfinite(r["return"]) else 1e9
-                             for r in rows])
+                es.tell(xs, _fitness(spec, rows))
             evaluations += len(rows)
             for r in rows:
-                if return_score(r) > return_score(best):
+                if rank(r) < rank(best):
                     best = r
     return best, default, evaluations
 
@@ -304,7 +321,8 @@ def restart_popsizes(dim: int, popsize: int | None, budget: int, restarts: int) 
 def _restarted_search(family: str, scene_name: str, scales: dict[str, float], budget: int,
                       popsize: int | None, episodes: int, seed: int, preset: str, env_id: str,
                       executor, bar, env_kwargs, restarts: int = 0,
-                      start: dict | None = None) -> tuple[dict, dict, int, list[dict]]:
+                      start: dict | None = None, spec=None
+                      ) -> tuple[dict, dict, int, list[dict]]:
     """The first search (from the centre, or refining ``start``), then ``restarts`` searches
     from points drawn uniformly in the unit box (seeded by ``seed``), with the populations of
     :func:`restart_popsizes`; each has ``budget`` candidates.  CMA-ES is a local method: a
@@ -312,7 +330,7 @@ def _restarted_search(family: str, scene_name: str, scales: dict[str, float], bu
     in return short of a profile tuned for another weight, on its own objective).  Returns the
     best row of all, the family default's row, the candidates run and one line per search."""
     best, default, n = _cma_search(family, scene_name, scales, budget, popsize, episodes, seed,
-                                   preset, env_id, executor, bar, env_kwargs, start)
+                                   preset, env_id, executor, bar, env_kwargs, start, spec=spec)
     _shrink_bar(bar, budget, n)
     dim = len(profiles.search_space(family_class(family)))
     sizes = restart_popsizes(dim, popsize, budget, restarts) if dim else [0]
@@ -321,12 +339,13 @@ def _restarted_search(family: str, scene_name: str, scales: dict[str, float], bu
     points = np.random.default_rng([seed, 1]).uniform(0.0, 1.0, (len(sizes) - 1, dim))
     for r, (size, x0) in enumerate(zip(sizes[1:], points), start=1):
         found, _, m = _cma_search(family, scene_name, scales, budget, size, episodes, seed,
-                                  preset, env_id, executor, bar, env_kwargs, x0=x0, run=r)
+                                  preset, env_id, executor, bar, env_kwargs, x0=x0, run=r,
+                                  spec=spec)
         _shrink_bar(bar, budget, m)
         n += m
         runs.append({"start": "random", "popsize": size, "candidates": m,
                      "best_return": round(found["return"], 5)})
-        if return_score(found) > return_score(best):
+        if _rank_key(spec)(found) < _rank_key(spec)(best):
             best = found
     if not dim:  # nothing to restart: the bar's share of the restarts is not coming
         _shrink_bar(bar, budget * restarts, 0)
@@ -338,14 +357,17 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
          out: str | Path | None = None, force: bool = False, popsize: int | None = None,
          env_id: str = ENV_ID, progress: bool = True,
          env_kwargs: dict[str, Any] | None = None, restarts: int = 0,
-         start: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+         start: dict[str, dict[str, Any]] | None = None, spec=None) -> dict[str, Any]:
     """Tune each family with CMA-ES (module docstring): ``budget`` candidates per search, each
     scored on ``episodes`` seeded episodes of ``preset`` (with ``env_kwargs``, e.g. the reward
     weights an agent was trained with, so that both optimise the same return).  ``restarts``
     more searches per family start from random points (:func:`_restarted_search`); ``start``
     maps a family to parameters its first search refines (e.g. the shipped tuning, which is
-    then a candidate, so the result is never worse on these episodes).  Returns the result
-    and, with ``out``, writes it there (:func:`write_tuned`)."""
+    then a candidate, so the result is never worse on these episodes).  ``spec`` (a
+    :class:`~abb_gym.baselines.specification.Specification` or its text, e.g.
+    ``"peak_whirl<=20,run_up<=5"``) replaces the return objective by the least residual under
+    its requirements.  Returns the result and, with ``out``, writes it there
+    (:func:`write_tuned`)."""
     import cma
 
     families = tuple(families)
@@ -359,6 +381,8 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
     if isinstance(restarts, bool) or not isinstance(restarts, (int, np.integer)) \
             or not 0 <= restarts <= 100:
         raise ValueError(f"restarts must be an integer from 0 to 100 (got {restarts!r})")
+    if spec is not None and not isinstance(spec, Specification):
+        spec = Specification.parse(spec, "spec")
     start = dict(start or {})
     for fam, params in start.items():
         if fam not in families:
@@ -379,14 +403,16 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
         "scene": name, "env": env_id, "preset": preset,
         "env_kwargs": dict(env_kwargs or {}), "episodes": episodes,
         "seed": seed, "optimiser": _optimiser(cma.__version__, budget, restarts, start),
-        "objective": OBJECTIVE, "families": {}}
-    with tqdm(total=budget * (1 + restarts) * len(families), desc=f"tune {scene_name}",
-              unit="candidate", disable=not progress) as bar:
+        "objective": OBJECTIVE if spec is None else
+        f"least mean residual vibration with {spec} (feasibility first: "
+        f"abb_gym.baselines.specification)", "families": {}}
+    with ProgressBar(total=budget * (1 + restarts) * len(families), desc=f"tune {scene_name}",
+                     unit="candidate", disable=not progress) as bar:
         for fam in families:
             bar.set_postfix_str(fam)
             best, default, n, runs = _restarted_search(
                 fam, scene_name, scales, budget, popsize, episodes, seed, preset, env_id,
-                executor, bar, env_kwargs, restarts, start.get(fam))
+                executor, bar, env_kwargs, restarts, start.get(fam), spec)
             result["families"][fam] = {
                 "params": _rounded(best["params"]),
                 "mean_return": round(best["return"], 5),
@@ -396,6 +422,10 @@ def tune(scene_name: str, families=FAMILY_NAMES, budget: int = 240, episodes: in
                 "at_speed": round(best["at_speed"], 4),
                 "candidates": n,
             }
+            if spec is not None:
+                result["families"][fam].update(
+                    mean_peak_whirl=round(best["peak_whirl"], 4),
+                    feasible=spec.violation(best) == 0.0, requirements=spec.report(best))
             if len(runs) > 1 or fam in start:
                 result["families"][fam]["searches"] = runs
     if out is not None:
@@ -503,8 +533,8 @@ def tune_per_machine(scene_name: str, family: str = "knots", episodes: int = 100
     if executor is not None:
         return executor.map(_search_machine, tasks,
                             desc=f"oracle {family} {scene_name}: machines")
-    with tqdm(total=budget * episodes, desc=f"oracle {family} {scene_name}",
-              unit="candidate", disable=not progress) as bar:
+    with ProgressBar(total=budget * episodes, desc=f"oracle {family} {scene_name}",
+                     unit="candidate", disable=not progress) as bar:
         return [_search_machine(task, bar) for task in tasks]
 
 
@@ -563,8 +593,8 @@ def sweep(scene_name: str, families=FAMILY_NAMES, n: int = 12, episodes: int = 1
     rng = np.random.default_rng(seed + 7)
     swept = [fam for fam in families if profiles.search_space(family_class(fam))]
     rows = []
-    with tqdm(total=n * len(swept), desc=f"sweep {scene_name}", unit="candidate",
-              disable=not progress) as bar:
+    with ProgressBar(total=n * len(swept), desc=f"sweep {scene_name}", unit="candidate",
+                     disable=not progress) as bar:
         for fam in swept:
             bar.set_postfix_str(fam)
             d = len(profiles.search_space(family_class(fam)))

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from .._files import savefig
 from ..physics import MotorDrive, SimulationError, SpeedProfile, list_scenes, load_scene
@@ -23,6 +22,7 @@ from ..physics import simulate
 from ..physics.simulate import initial_state
 from ..physics.steps import default_step, drive_max_speed
 from ..physics.trajectory import Trajectory
+from ..progress import ProgressBar
 
 OUTPUT_DT = 0.01  # s, the environments' control interval
 
@@ -132,7 +132,7 @@ def run_accuracy(cases: list[Case] | None = None, repeats: int = 3,
         for precision in ("float64", "float32"):  # compile / load the batched kernels
             batch_run(scene, case.drive, ref.t[:2], 1e-3, precision)
         todo = settings(scene, case)
-        for method, kw in tqdm(todo, desc=f"accuracy {case.scene}", disable=not progress):
+        for method, kw in ProgressBar(todo, desc=f"accuracy {case.scene}", disable=not progress):
             setting = ", ".join(f"{k}={v:.3g}" for k, v in kw.items())
             row = {"scene": case.scene, "method": method, "setting": setting}
             try:
@@ -166,8 +166,8 @@ def precision_table(scenes: list[str] | None = None, kernel: str = "generic",
     difference; balls that travel as a clump and then part (an unstable equilibrium) go the
     way the rounding at that moment tips them, and float32's rounding is 1e9 times float64's."""
     rows = []
-    for name in tqdm(scenes or list_scenes(), desc="float32 against float64",
-                     disable=not progress):
+    for name in ProgressBar(scenes or list_scenes(), desc="float32 against float64",
+                            disable=not progress):
         scene = load_scene(name)
         a = scene.drive_max_acceleration / 2
         w = scene.drive_operating_speed
@@ -212,7 +212,7 @@ def energy_drift(t_end: float = 60.0, progress: bool = True) -> list[dict]:
             ("ros2", {"dt": 5e-4}), ("dopri5", {"rtol": 1e-6}), ("dopri5", {"rtol": 1e-9}),
             ("DOP853", {"rtol": 1e-10}), ("Radau", {"rtol": 1e-8, "max_steps": 200_000})]
     rows = []
-    for method, opts in tqdm(runs, desc="energy drift", disable=not progress):
+    for method, opts in ProgressBar(runs, desc="energy drift", disable=not progress):
         tr = simulate(scene, drive, t_end, method=method, energy_tolerance=np.inf, **kw, **opts)
         e = np.array([mdl.total_energy(s, p, b) for s in tr.states])
         # Radau at rtol 1e-8 over 60 s needs about 1.8e6 right-hand sides (some 100 s), beyond

@@ -24,10 +24,10 @@ from contextlib import contextmanager
 from typing import Iterator, Sequence
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..physics import batch
 from ..physics.methods import PRECISIONS
+from ..progress import ProgressBar
 from .env_speed import make_vector
 
 __all__ = ["block_size_rates", "BURST"]
@@ -85,7 +85,7 @@ def _race(envs: list, sizes: list[int], num_envs: int, rounds: int, progress: bo
         for a in actions:
             env.step(a)
     times = np.zeros((rounds, len(envs)))
-    for r in tqdm(range(rounds), desc="bursts", disable=not progress, file=sys.stderr):
+    for r in ProgressBar(range(rounds), desc="bursts", disable=not progress, file=sys.stderr):
         # alternate which size goes first, so neither always follows the other
         for i in (range(len(envs)) if r % 2 == 0 else reversed(range(len(envs)))):
             start = time.perf_counter()

@@ -206,10 +206,10 @@ def _vector_memory(num_envs: int) -> float:
 def measure(scipy_rate: float, quick: bool = False) -> Iterator[dict]:
     """The rows of the environment part of ``abb-gym bench speed``, each as soon as the
     measurements it reports are done."""
-    from tqdm import tqdm
+    from ..progress import ProgressBar
     repeats = 1 if quick else 3
     steps = {64: 400, 1024: 100, 4096: 30} if not quick else {64: 40, 1024: 10, 4096: 5}
-    bar = tqdm(total=len(VECTOR_SIZES) + 9, desc="bench speed (environments)", leave=False)
+    bar = ProgressBar(total=len(VECTOR_SIZES) + 9, desc="bench speed (environments)", leave=False)
     note = f"{SCENE}, rk4 at the default step, random actions, {EPISODE_STEPS}-step episodes"
     try:
         vec = {}

@@ -38,6 +38,8 @@ SUBCOMMANDS = [
     "abb_gym.cli.kernels",
     "abb_gym.cli.render",
     "abb_gym.cli.convert",
+    "abb_gym.cli.listing",
+    "abb_gym.cli.new_scene",
 ]
 
 

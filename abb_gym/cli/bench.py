@@ -63,7 +63,7 @@ def run_accuracy(args) -> int:
 def run_speed(args) -> int:
     """Each row printed as soon as it is measured (above the progress bars); speed.md gets
     the aligned table at the end."""
-    from tqdm import tqdm
+    from ..progress import ProgressBar
 
     from ..benchmarks.speed import COLUMNS, iter_speed
     out = output_folder(args.out, "--out")
@@ -75,7 +75,7 @@ def run_speed(args) -> int:
             yield row
 
     for line in markdown_lines(measured(), COLUMNS):
-        tqdm.write(line, file=sys.stdout)
+        ProgressBar.write(line, file=sys.stdout)
         sys.stdout.flush()
     write_text(out / "speed.md", markdown_table(rows, COLUMNS) + "\n")
     print(f"wrote {out / 'speed.md'}")

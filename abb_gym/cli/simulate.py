@@ -1,5 +1,12 @@
 """``abb-gym simulate``: one run of a scene under a speed profile or a motor, as a table,
-JSON and a thesis-style PNG."""
+JSON and a thesis-style PNG.
+
+The drive defaults to the scene's: a ramp at half ``drive.max_acceleration`` held at
+``drive.operating_speed``, for as long as it takes to reach that speed plus the 1 s settling
+window.  A drive beyond the scene's drive limits (a speed above ``drive.operating_speed``,
+an acceleration above ``drive.max_acceleration``, a torque above ``drive.torque_limit``) is
+refused before the run, naming the limit, unless ``--allow-beyond-drive-limits``
+(:mod:`abb_gym.physics.drive_limits`)."""
 from __future__ import annotations
 
 import argparse
@@ -34,8 +41,8 @@ def register(sub) -> None:
                    help="prescribed speed profile (default ramp; not with --motor-torque or "
                         "--limited-power)")
     p.add_argument("--accel", type=float, default=None,
-                   help=f"run-up acceleration of ramp and dwell [rad/s^2] (default "
-                        f"{DEFAULTS['accel']:g})")
+                   help="run-up acceleration of ramp and dwell [rad/s^2] (default: half the "
+                        "scene's drive.max_acceleration)")
     p.add_argument("--dwell-speed", type=float, default=None,
                    help="dwell start speed [rad/s] (default: the scene's critical speed)")
     p.add_argument("--dwell-time", type=float, default=None,
@@ -43,7 +50,8 @@ def register(sub) -> None:
     p.add_argument("--dwell-accel", type=float, default=None,
                    help="acceleration during the dwell [rad/s^2] (default 0: constant speed)")
     p.add_argument("--operating-speed", type=float, default=None,
-                   help="hold speed of ramp and dwell [rad/s] (default: keep accelerating)")
+                   help="hold speed of ramp and dwell [rad/s] (default: the scene's "
+                        "drive.operating_speed)")
     p.add_argument("--speed", type=float, default=None,
                    help="speed of --profile constant, target of --limited-power [rad/s] "
                         "(default: the scene's operating speed)")
@@ -51,7 +59,12 @@ def register(sub) -> None:
                    help="drive the rotor with a constant motor torque [N m] instead")
     p.add_argument("--limited-power", type=float, default=None, metavar="GAIN",
                    help="limited-power drive M0 = GAIN (target - w) [N m s]; target: --speed")
-    p.add_argument("--t-end", type=float, default=6.0, help="simulated time [s]")
+    p.add_argument("--t-end", type=float, default=None,
+                   help="simulated time [s] (default: until the profile holds its speed, "
+                        "plus 1 s; a motor drive needs it)")
+    p.add_argument("--allow-beyond-drive-limits", action="store_true",
+                   help="run a drive beyond the scene's drive limits (operating speed, "
+                        "largest acceleration, torque limit) instead of refusing it")
     p.add_argument("--ball-angles-deg", type=float, nargs="+", default=None,
                    help="initial ball angles [deg] (default: the scene's)")
     p.add_argument("--method", default="rk4", choices=METHODS,
@@ -66,7 +79,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-DEFAULTS = {"accel": 40.0, "dwell_time": 0.5, "dwell_accel": 0.0}
+DEFAULTS = {"dwell_time": 0.5, "dwell_accel": 0.0}
 # the options each drive reads (any other drive option given with it is refused)
 DRIVE_OPTIONS = {
     "motor": ("motor_torque",),
@@ -123,16 +136,38 @@ def build_drive(args, scene):
             args.speed if args.speed is not None else scene.drive_operating_speed)
     elif _drive_kind(args) == "dwell":
         dwell_speed = scene.critical_speed if args.dwell_speed is None else args.dwell_speed
+        accel, hold = _run_up(args, scene)
         options = "--accel/--dwell-speed/--dwell-time/--dwell-accel/--operating-speed"
-        make = lambda: SpeedProfile.dwell(args.accel, dwell_speed, args.dwell_time,  # noqa
-                                          args.dwell_accel, args.operating_speed)
+        make = lambda: SpeedProfile.dwell(accel, dwell_speed, args.dwell_time,  # noqa
+                                          args.dwell_accel, hold)
     else:
+        accel, hold = _run_up(args, scene)
         options = "--accel/--operating-speed"
-        make = lambda: SpeedProfile.ramp(args.accel, args.operating_speed)  # noqa: E731
+        make = lambda: SpeedProfile.ramp(accel, hold)  # noqa: E731
     try:
         return make()
     except ValueError as exc:
         raise ValueError(f"{options}: {exc}") from None
+
+
+def _run_up(args, scene) -> tuple[float, float]:
+    """(acceleration [rad/s^2], hold speed [rad/s]) of a ramp or dwell: the options, else the
+    scene's nominal run-up (:func:`abb_gym.physics.drive_limits.nominal_drive`)."""
+    from ..physics.drive_limits import nominal_acceleration
+    accel = nominal_acceleration(scene) if args.accel is None else args.accel
+    hold = scene.drive_operating_speed if args.operating_speed is None else args.operating_speed
+    return accel, hold
+
+
+def check_drive_limits(args, scene, drive, t_end: float) -> None:
+    """Refuse a drive beyond the scene's drive limits (ValueError naming them and the
+    options), unless ``--allow-beyond-drive-limits``."""
+    from ..physics.drive_limits import drive_excess
+    excess = drive_excess(scene, drive, t_end)
+    if excess and not args.allow_beyond_drive_limits:
+        raise ValueError(f"scene {scene.name!r}: {'; '.join(excess)}; change the drive "
+                         f"options or the scene's drive.* fields, or run it anyway with "
+                         f"--allow-beyond-drive-limits")
 
 
 def ball_angles(args, scene):
@@ -152,8 +187,14 @@ def ball_angles(args, scene):
 def run(args) -> int:
     from ..physics import load_scene, simulate
     from .outputs import output_file, output_image
+    from ..physics.drive_limits import default_t_end
     scene = load_scene(args.scene, **parse_overrides(args.set))
     drive = build_drive(args, scene)
+    try:
+        t_end = default_t_end(drive) if args.t_end is None else args.t_end
+    except ValueError as exc:
+        raise ValueError(f"--t-end: {exc}") from None
+    check_drive_limits(args, scene, drive, t_end)
     angles = ball_angles(args, scene)
     # after the inputs (no folders for a rejected command), before the run; an empty path is
     # refused, not read as "no --plot"
@@ -161,8 +202,9 @@ def run(args) -> int:
         output_image(args.plot, "--plot")
     if args.json is not None and args.json != "-":
         output_file(args.json, "--json")
-    tr = simulate(scene, drive, args.t_end, ball_angles0=angles, method=args.method, dt=args.dt,
-                  output_dt=args.output_dt)
+    tr = simulate(scene, drive, t_end, ball_angles0=angles, method=args.method, dt=args.dt,
+                  output_dt=args.output_dt,
+                  drive_limits="ignore" if args.allow_beyond_drive_limits else "raise")
     if args.plot is not None:
         from ..plots import plot_runup
         plot_runup(tr, args.plot)

@@ -8,7 +8,10 @@ Example (Lu & Hung's zeta-Omega plane for the lu_hung_odd3 scene, 2- and 3-ball 
 Without ``--scene`` the base is the dimensionless groups (defaults of
 :class:`abb_gym.analysis.Groups`, changed with ``--set name=value``).  Axis names: ``Omega``,
 any group (eta, eta_total, mu, delta, zeta, zeta_b, spin, race_eccentricity, ...) or, with a
-scene, any scene field.  Writes ``<out>.csv`` and ``<out>.png``.
+scene, any scene field by its YAML path or its flat name (``balls.drag`` or ``ball_drag``; the
+same names as ``--set``).  ``Omega`` is the rotor speed over the undamped natural frequency
+w_n = sqrt(K/M).  Writes ``<out>.csv`` and ``<out>.png`` (axes labelled with their
+definitions and units, ``Omega`` explained under the plot).
 
 Execution options are those of every sweep command (:mod:`abb_gym.execution.cli`): local
 processes (``--workers N``, default all cores), a local Ray instance (``--ray``) or an existing

@@ -106,8 +106,11 @@ def config_from_args(args: argparse.Namespace):
 
 def _report(res) -> None:
     print(f"run folder: {res.run_dir}")
-    print(f"wall time {res.wall_time_s:.1f} s, {res.env_steps} env steps, "
-          f"{res.env_steps_per_s:.0f} env-steps/s (evaluations included)")
+    rate = res.training_steps_per_s
+    speed = (f"{rate:.0f} env-steps/s (training only: without the first step, which compiles "
+             f"the kernel when it is not cached, and without the evaluations)"
+             if math.isfinite(rate) else "too few steps to measure a speed")
+    print(f"wall time {res.wall_time_s:.1f} s, {res.env_steps} env steps, {speed}")
     s = res.evaluation
     if s:
         def fmt(key: str, digits: int = 3) -> str:

@@ -8,6 +8,13 @@ folder).  ``baseline:NAME`` policies use a ``baselines/<scene>.yaml`` of a confi
 
 The file is named after the scene's ``name`` (the name ``baseline:NAME`` looks it up by),
 also when ``--scene`` is a YAML path.  An existing file is replaced only with ``--force``.
+
+The objective is the environment's return, or, with ``--spec``, an engineer's specification:
+the least mean residual vibration among the profiles that meet every requirement
+(:mod:`abb_gym.baselines.specification`; ranked feasibility first), e.g.::
+
+    abb-gym tune-baselines --scene yoshida_odd --family ramp --family speed_dwell \\
+        --spec "peak_whirl<=20,run_up<=5" --out my_configs/baselines
 """
 from __future__ import annotations
 
@@ -33,6 +40,11 @@ def register(sub) -> None:
                    help="families to tune (repeatable; default all)")
     p.add_argument("--env", default=tasks.DEFAULT_ENV_ID, choices=tasks.task_ids(open_loop=True),
                    help="environment whose return is the objective")
+    p.add_argument("--spec", default=None, metavar="REQUIREMENTS",
+                   help="minimise the mean residual vibration under requirements instead of "
+                        "maximising the return, e.g. 'peak_whirl<=20,run_up<=5' (metrics: "
+                        "peak_whirl [W_r/e], run_up [s], residual [W_r/e], at_speed and "
+                        "balanced [share]; at_speed>=1 unless given)")
     p.add_argument("--budget", type=int, default=240,
                    help="candidates per family (CMA-ES evaluations)")
     p.add_argument("--popsize", type=int, default=None,
@@ -88,6 +100,10 @@ def run(args) -> int:
         raise ValueError(f"--seed must be >= 0 (got {args.seed})")
     if not 0 <= args.restarts <= 100:
         raise ValueError(f"--restarts must be from 0 to 100 (got {args.restarts})")
+    spec = None
+    if args.spec is not None:
+        from ..baselines.specification import Specification
+        spec = Specification.parse(args.spec)
     from ..baselines.tuner import check_tuned_path, tuned_path
     from ..configuration import parse_assignments
     from ..evaluation.evaluate import check_inputs
@@ -113,8 +129,14 @@ def run(args) -> int:
     result = tune(args.scene, families, args.budget, args.episodes,
                   args.seed, args.preset, executor, out=out, force=args.force,
                   popsize=args.popsize, env_id=args.env, env_kwargs=env_kwargs,
-                  restarts=args.restarts, start=start)
+                  restarts=args.restarts, start=start, spec=spec)
     print(yaml.safe_dump(result, sort_keys=False))
+    if spec is not None:
+        for fam, row in result["families"].items():
+            state = "meets" if row["feasible"] else "does NOT meet"
+            print(f"{fam}: {state} {spec} (mean residual {row['mean_residual_vibration']:g} "
+                  f"W_r/e, peak {row['mean_peak_whirl']:g} W_r/e, run-up "
+                  f"{row['mean_run_up_time']:g} s)")
     return 0
 
 

@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 
 from .display import SINGLE_METADATA
+from .learning import advise
 from .tasks import TASKS, Task, get
 
 __all__ = ["env_class", "vector_class", "make_single", "make_vector"]
@@ -54,12 +55,15 @@ def make_single(env_id: str, **kwargs: Any) -> gym.Env:
     (:mod:`abb_gym.envs`)."""
     task = get(env_id)
     env = env_class(task)(task=env_id, **kwargs)
+    advise(task)
     return env if task.registered_steps is not None else _own_limit(env)
 
 
 def make_vector(env_id: str, **kwargs: Any):
     """The native vector environment of ``env_id`` made with ``kwargs``."""
-    return vector_class(get(env_id))(task=env_id, **kwargs)
+    env = vector_class(get(env_id))(task=env_id, **kwargs)
+    advise(get(env_id))
+    return env
 
 
 def _maker(name: str):

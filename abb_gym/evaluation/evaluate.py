@@ -24,11 +24,11 @@ from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
-from tqdm import tqdm
 
 from ..physics.rotor import spinning_inertia
 from ..envs import tasks
 from ..envs.episode_parameters import PARAMETERS
+from ..progress import ProgressBar
 from . import metrics as mt
 from .registry import Policy, resolve
 from .statistics import mean_interval, share_ci
@@ -313,8 +313,8 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
     tasks = chunks(env_id, scene, policy, episodes, seed, preset, chunk_size, record,
                    **env_kwargs)
     if executor is None:  # this process; the vector environment already uses every core
-        parts = [_run_chunk_task(c) for c in tqdm(tasks, desc=f"evaluate {policy}",
-                                                  disable=len(tasks) < 2)]
+        parts = [_run_chunk_task(c) for c in ProgressBar(tasks, desc=f"evaluate {policy}",
+                                                         disable=len(tasks) < 2)]
     else:
         parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
     result = EvaluationResult(policy, env_id, scene, preset, seed,

@@ -151,7 +151,7 @@ def ball_start_observability(scene: str = "spannan_cfrp", train_preset: str = "v
     :func:`abb_gym.evaluation.evaluate.evaluate` runs).  ``env_kwargs`` configure the
     environment (e.g. the agents' ``control_interval`` and the synchronous-vibration sensor);
     the observation is taken one decision at a time and stacked here."""
-    from tqdm import tqdm
+    from ..progress import ProgressBar
     for name, value, low in (("train_machines", train_machines, 8),
                              ("test_machines", test_machines, 8), ("epochs", epochs, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
@@ -174,8 +174,8 @@ def ball_start_observability(scene: str = "spannan_cfrp", train_preset: str = "v
                                           env_kwargs, control_seed=(seed, 2))
     rows = []
     rng = np.random.default_rng((seed, 3))
-    with tqdm(total=len(counts) * len(TARGETS), desc="observability", unit="fit",
-              disable=not progress) as bar:
+    with ProgressBar(total=len(counts) * len(TARGETS), desc="observability", unit="fit",
+                     disable=not progress) as bar:
         for n in counts:
             x = x_tr[:, :n + 1].reshape(len(x_tr), -1)
             xt = x_te[:, :n + 1].reshape(len(x_te), -1)

@@ -20,10 +20,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from .._files import replacing, savefig
 from ..physics import SpeedProfile, load_scene, simulate
+from ..progress import ProgressBar
 
 ACCEL = 40.0  # rad/s^2, Yoshida's run-up rate
 ACCEL_DWELL = 20.0  # rad/s^2, his constant-acceleration dwell (Fig. 4.15)
@@ -59,7 +59,7 @@ def _settling_task(task) -> dict:
 
 def _map(fn, tasks, desc, progress, executor):
     if executor is None:
-        return [fn(t) for t in tqdm(tasks, desc=desc, disable=not progress)]
+        return [fn(t) for t in ProgressBar(tasks, desc=desc, disable=not progress)]
     return executor.map(fn, tasks, desc=desc)
 
 

@@ -110,7 +110,7 @@ def render_episode(env_id: str, scene: str, policy: str, out: str | os.PathLike,
     episode's row of the evaluation).  ``steps`` cuts the episode after that many control
     steps (truncated, as ``max_episode_steps``).  Every input is checked before anything
     runs (ValueError naming it)."""
-    from tqdm import tqdm
+    from ..progress import ProgressBar
 
     from ..envs import episode_steps
     from ..envs.setup import EnvSetup
@@ -143,13 +143,17 @@ def render_episode(env_id: str, scene: str, policy: str, out: str | os.PathLike,
     part = out.with_name(f".{out.stem}.partial{out.suffix}")
     state = {"k": -1, "frames": 0, "shape": None}  # k: control steps run (-1 before the reset)
     writer = _Writer(part, fps)
-    bar = tqdm(total=n_steps, desc=f"render {policy}", unit="step", disable=not progress)
+    bar = ProgressBar(total=n_steps, desc=f"render {policy}", unit="step", disable=not progress)
 
     def on_step(env, done) -> None:
         last = bool(done[0])
         state["k"] += 1
         if state["k"]:  # the call after the reset is not a step
             bar.update(1)
+        if last and state["k"] != bar.total:
+            # the bar's total is the longest episode; this one ended at its own length
+            bar.total = state["k"]
+            bar.refresh()
         if state["k"] % every == 0 or last:
             frame = env.render()[0]
             state["shape"] = frame.shape

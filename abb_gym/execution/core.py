@@ -237,9 +237,9 @@ class Executor:
             # one line the user needs
             from .ray_backend import ensure_ray
             ensure_ray(self.ray_address, self.workers, self.runtime_env)
-        from tqdm.auto import tqdm
-        bar = tqdm(total=n, initial=sum(done), desc=desc, unit="task",
-                   disable=not self.progress, dynamic_ncols=True)
+        from ..progress import ProgressBar
+        bar = ProgressBar(total=n, initial=sum(done), desc=desc, unit="task",
+                          disable=not self.progress, dynamic_ncols=True)
 
         def on_result(index: int, value: Any) -> None:
             if done[index]:  # a duplicate delivery (e.g. a retried Ray chunk): keep the first

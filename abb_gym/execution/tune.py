@@ -326,7 +326,7 @@ def run_trials(trainable: Callable[[dict], dict | None], space: dict, *, num_sam
 
 def _run_tune(trainable, configs, ids, executor: Executor, metric, mode, resources_per_trial,
               name, storage_path, tune_config, desc) -> list[dict]:
-    from tqdm.auto import tqdm
+    from ..progress import ProgressBar
 
     from .ray_backend import ensure_ray
 
@@ -343,8 +343,8 @@ def _run_tune(trainable, configs, ids, executor: Executor, metric, mode, resourc
                 results[j] = value
         else:
             todo.append(idxs[0])
-    bar = tqdm(total=len(configs), initial=sum(r is not None for r in results), desc=desc,
-               unit="trial", disable=not executor.progress, dynamic_ncols=True)
+    bar = ProgressBar(total=len(configs), initial=sum(r is not None for r in results), desc=desc,
+                      unit="trial", disable=not executor.progress, dynamic_ncols=True)
     try:
         if todo:
             ensure_ray(executor.ray_address, executor.workers, executor.runtime_env)

@@ -1,11 +1,15 @@
 """Scenes: validated, SI-unit parameter sets for one balancer machine.
 
 A scene is one YAML file in ``configs/scenes/`` (or a user folder, or any path: see
-:mod:`abb_gym.resources`), grouped into sections.  Every field has a YAML path (the table
-below; ``rotor.mass`` is the field ``rotor_mass``), and any field can be overridden by
-keyword::
+:mod:`abb_gym.resources`), grouped into sections.  Every field has two names, accepted
+everywhere a scene field is named (a YAML file, ``load_scene`` and ``Scene.replace``
+keywords, ``abb-gym simulate --set``, the axes and ``--set`` of ``abb-gym stability-map``):
+its YAML path (``balls.drag``) and its flat name (``ball_drag``), both in the table below.
+Two shortcuts set both axes of the support: ``support.stiffness`` (``support_stiffness``)
+and ``support.damping`` (``support_damping``)::
 
     scene = load_scene("yoshida_odd", ball_mass=2e-3, support_stiffness=2000.0)
+    scene = load_scene("yoshida_odd", **{"balls.mass": 2e-3, "support.stiffness": 2000.0})
 
 Units are SI throughout and angles are radians.  Per-ball fields accept one number (same for
 every ball) or a list of ``ball_count`` numbers; ``support.stiffness`` and ``support.damping``
@@ -49,7 +53,8 @@ from .. import resources
 from ..configuration import ConfigError, check, declare, fields_table, locate, read_yaml, specs
 from . import fluids as _fluids
 
-__all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError"]
+__all__ = ["Scene", "load_scene", "list_scenes", "scenes_dir", "SceneError", "FIELD_NAMES",
+           "resolve_field", "field_spec"]
 
 ANGLE_LIMIT = 1.0e3  # rad: beyond it, rounding of the angle changes the machine
 # m: smallest non-zero eccentricity.  Either one can be the reference length that divides the
@@ -296,7 +301,7 @@ class Scene:
 
 _SPECS = specs(Scene)
 __doc__ = __doc__.replace("{table}", fields_table(Scene, [n for n in _SPECS if n != "name"],
-                                                  title="YAML path"))
+                                                  title="YAML path", flat_names=True))
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(Scene)
              if f.default is not dataclasses.MISSING}
 # YAML path -> field; support.stiffness and support.damping set both axes
@@ -304,6 +309,45 @@ _BY_PATH = {(spec.yaml or name): name for name, spec in _SPECS.items()}
 _SHORTCUTS = {"support_stiffness": ("support_stiffness_x", "support_stiffness_y"),
               "support_damping": ("support_damping_x", "support_damping_y")}
 _SECTIONS = {path.split(".")[0] for path in _BY_PATH if "." in path}
+
+
+def _field_names() -> dict[str, tuple[str, ...]]:
+    names: dict[str, tuple[str, ...]] = {}
+    for name, spec in _SPECS.items():
+        names[name] = (name,)
+        if spec.yaml:
+            names[spec.yaml] = (name,)
+    for short, targets in _SHORTCUTS.items():
+        section, _, key = short.partition("_")
+        names[short] = names[f"{section}.{key}"] = targets
+    return names
+
+
+#: every accepted name of a scene field -> the field(s) it sets: the flat name
+#: (``ball_drag``), the YAML path (``balls.drag``) and the two-axis support shortcuts, all
+#: derived from the declarations on :class:`Scene`
+FIELD_NAMES: dict[str, tuple[str, ...]] = _field_names()
+
+
+def resolve_field(name: Any, where: str = "scene") -> tuple[str, ...]:
+    """The field(s) a scene field name sets (:data:`FIELD_NAMES`: ``"balls.drag"`` and
+    ``"ball_drag"`` both give ``("ball_drag",)``); an unknown name is a :class:`SceneError`
+    naming the closest ones."""
+    if isinstance(name, str) and name in FIELD_NAMES:
+        return FIELD_NAMES[name]
+    import difflib
+    close = difflib.get_close_matches(str(name), list(FIELD_NAMES), n=3, cutoff=0.6)
+    hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+    raise SceneError(f"{where}: unknown field(s) [{name!r}]{hint} (a scene field is named by "
+                     f"its YAML path, e.g. 'balls.drag', or its flat name, e.g. 'ball_drag': "
+                     f"see abb_gym.physics.scene)")
+
+
+def field_spec(name: str) -> tuple[str, Any]:
+    """(flat name, :class:`~abb_gym.configuration.Spec`) of the scene field ``name`` (either
+    spelling; a support shortcut gives its x axis), e.g. for an axis label with a unit."""
+    field = resolve_field(name)[0]
+    return field, _SPECS[field]
 
 
 # ---------------------------------------------------------------------------- validation
@@ -429,17 +473,21 @@ def _build(data: Mapping[str, Any], scene_name: str) -> Scene:
 
 
 def _apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], scene_name: str) -> None:
+    """``overrides`` (by either name of a field, :data:`FIELD_NAMES`) written into ``data``;
+    one field given twice (``ball_drag`` and ``balls.drag``) is refused."""
+    given: dict[str, str] = {}
     for key, value in overrides.items():
-        if key in _SHORTCUTS:
-            for target in _SHORTCUTS[key]:
-                data[target] = value
-        else:
-            data[key] = value
-    if "ball_count" in overrides:
+        for target in resolve_field(key, f"scene {scene_name!r}"):
+            if target in given:
+                raise SceneError(f"scene {scene_name!r}: field {target!r} is given twice "
+                                 f"(as {given[target]!r} and {key!r})")
+            given[target] = key
+            data[target] = value
+    if "ball_count" in given:
         # per-ball lists of the old length cannot follow a new count; a single value can
         for name, spec in _SPECS.items():
             v = data.get(name)
-            if spec.per_ball and name not in overrides and isinstance(v, (list, tuple)) \
+            if spec.per_ball and name not in given and isinstance(v, (list, tuple)) \
                     and _uniform(v):
                 data[name] = v[0]
 
@@ -476,8 +524,11 @@ def _flatten_yaml(raw: Mapping[str, Any], scene_name: str) -> dict[str, Any]:
                     raise SceneError(f"scene {scene_name!r}: unknown key {path!r}; allowed in "
                                      f"section {key!r}: "
                                      f"{sorted(p for p in _BY_PATH if p.startswith(key + '.'))}")
+        elif isinstance(key, str) and key in FIELD_NAMES:  # a flat name at the top level
+            for target in FIELD_NAMES[key]:
+                flat[target] = value
         else:
-            flat[_BY_PATH.get(key, key)] = value
+            flat[key] = value  # refused by _build, with the other unknown keys
     return flat
 
 
@@ -496,7 +547,8 @@ def load_scene(name_or_path: str | os.PathLike | Scene, **overrides: Any) -> Sce
     """Load a scene by name (on the search path of :mod:`abb_gym.resources`) or path and
     apply overrides.
 
-    Overrides are flat field names (see the module docstring), plus ``support_stiffness`` and
+    Overrides name a field by its flat name or its YAML path (``ball_drag=2.0`` or
+    ``**{"balls.drag": 2.0}``: :data:`FIELD_NAMES`), plus ``support_stiffness`` and
     ``support_damping`` which set both axes.  A Scene passed in is copied with the overrides.
     Raises :class:`SceneError` (a ValueError) naming the field and the allowed range.
     """

@@ -10,6 +10,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from . import drive_limits as limits
 from . import integrators as integ
 from . import model as mdl
 from .methods import COMPILED_METHODS, FIXED_STEP, METHOD_IDS, METHODS
@@ -100,12 +101,13 @@ def state_scale(scene: Scene) -> np.ndarray:
     return scale
 
 
-def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float, *,
+def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive | None = None,
+             t_end: float | None = None, *,
              ball_angles0=None, ball_speeds0=None, x0=(0.0, 0.0), v0=(0.0, 0.0),
              method: str = "rk4", dt: float | None = None, output_dt: float | None = None,
              rtol: float | None = None, atol: float | None = None,
              energy_tolerance: float = 1e-3, kernel: str | None = None,
-             max_steps: int | None = None) -> Trajectory:
+             max_steps: int | None = None, drive_limits: str = "warn") -> Trajectory:
     """Simulate a run of ``scene`` under ``drive`` from t = 0 to ``t_end`` [s].
 
     Every argument is checked before any work: numbers must be real numbers (not text, None or
@@ -115,8 +117,18 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
     Parameters
     ----------
     scene : Scene or scene name
-    drive : SpeedProfile (prescribed rotor angle) or MotorDrive (rotor spin as a DOF)
-    t_end : end time [s], > 0
+    drive : SpeedProfile (prescribed rotor angle) or MotorDrive (rotor spin as a DOF); default
+        the scene's nominal run-up, a ramp at half ``drive.max_acceleration`` held at
+        ``drive.operating_speed`` (:func:`~abb_gym.physics.drive_limits.nominal_drive`)
+    t_end : end time [s], > 0; default: until a speed profile holds its speed, plus the 1 s
+        settling window (:func:`~abb_gym.physics.drive_limits.default_t_end`; a motor needs
+        one)
+    drive_limits : a drive beyond the scene's drive limits (speed above
+        ``drive.operating_speed``, acceleration above ``drive.max_acceleration``, torque above
+        ``drive.torque_limit``): "warn" (default, a
+        :class:`~abb_gym.physics.drive_limits.DriveLimitWarning`), "raise" (ValueError before
+        the run; for a motor's speed, after it) or "ignore" (:mod:`abb_gym.physics.drive_limits`
+        says why the API warns)
     ball_angles0, ball_speeds0 : initial ball angles [rad] (default: the scene's) and relative
         speeds [rad/s] (default 0)
     x0, v0 : initial deflection [m] and velocity [m/s] of the rotor centre
@@ -152,8 +164,13 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
         gains energy.
     """
     scene = load_scene(scene) if not isinstance(scene, Scene) else scene
+    drive_limits = limits.check_mode(drive_limits)
+    if drive is None:
+        drive = limits.nominal_drive(scene)
     if not isinstance(drive, (SpeedProfile, MotorDrive)):
         raise ValueError(f"drive must be a SpeedProfile or MotorDrive (got {type(drive).__name__})")
+    if t_end is None:
+        t_end = limits.default_t_end(drive)
     t_end = _finite("t_end", t_end, positive=True, unit="s")
     if t_end < MIN_T_END:
         raise ValueError(f"t_end must be >= {MIN_T_END:g} s (got {t_end!r}): a shorter run "
@@ -203,6 +220,7 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
                              f"{dt!r}); pass dt [s]")
     check_work(scene, drive, method, t_end, t_out, len(seg_t), dt, default_dt, max_speed,
                max_steps, rtol)
+    limits.enforce(scene, limits.drive_excess(scene, drive, t_end), drive_limits)
     p, b = mdl.pack_parameters(scene)
     out = np.empty((len(t_out), len(s0)))
     start = time.perf_counter()
@@ -254,6 +272,10 @@ def simulate(scene: Scene | str, drive: SpeedProfile | MotorDrive, t_end: float,
                 float(t_out[k]), "energy")
     torque = None
     if isinstance(drive, MotorDrive):
-        torque = drive.torque_at(t_out, out[:, 3 + scene.ball_count + 2], scene)
+        speed = out[:, 3 + scene.ball_count + 2]
+        torque = drive.torque_at(t_out, speed, scene)
+        # a speed profile's speed was checked before the run; a motor's is known now
+        excess = limits.speed_excess(scene, t_out, speed)
+        limits.enforce(scene, [excess] if excess else [], drive_limits)
     return Trajectory(scene=scene, t=t_out, states=out, method=method, step=dt, wall_time=wall,
                       work=int(work), motor_torque=torque)

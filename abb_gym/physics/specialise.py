@@ -13,13 +13,10 @@ directly afterwards: a dictionary lookup plus the usual unboxing of the argument
 from __future__ import annotations
 
 import os
-import sys
-import threading
-import time
 from collections.abc import Sequence
-from contextlib import contextmanager
 
 import numpy as np
+from .._compile_notice import NOTICE_AFTER, compile_notice  # noqa: F401  (re-exported)
 from .._numba import typeof, types
 
 __all__ = ["Specialised", "compile_notice", "resolve_kernel", "start_parallel_runtime",
@@ -56,37 +53,6 @@ def resolve_kernel(kernel: str | None, lanes: int, cached_ok: bool = False) -> s
         kernel = ("specialised" if lanes >= VECTORISE_FROM else
                   "cached" if cached_ok else "generic")
     return kernel
-
-NOTICE_AFTER = 1.0  # [s] a compilation that takes longer than this is announced
-
-
-@contextmanager
-def compile_notice(what: str, after: float = NOTICE_AFTER):
-    """Announce on stderr a compilation that is still running after ``after`` seconds, and
-    its duration when it ends (silenced by ``ABB_GYM_QUIET=1``): nothing hangs without a word.
-    Loading a cached kernel takes well under a second and stays silent."""
-    if os.environ.get("ABB_GYM_QUIET"):
-        yield
-        return
-    start = time.perf_counter()
-    announced = threading.Event()
-
-    def announce():
-        announced.set()
-        sys.stderr.write(f"abb-gym: compiling {what} (once; cached on disk afterwards) ...\n")
-        sys.stderr.flush()
-
-    timer = threading.Timer(after, announce)
-    timer.daemon = True
-    timer.start()
-    try:
-        yield
-    finally:
-        timer.cancel()
-        if announced.is_set():
-            sys.stderr.write(f"abb-gym: compiled {what} in {time.perf_counter() - start:.0f} s\n")
-            sys.stderr.flush()
-
 
 def _layout(flags) -> str:
     """numba's layout letter of an array (numba.np.numpy_support.map_layout)."""

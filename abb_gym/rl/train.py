@@ -71,6 +71,7 @@ import numpy as np
 import yaml
 
 from .._files import replacing, write_text
+from ..progress import ProgressBar
 from .algorithms import algorithm_class
 from .config import TrainConfig
 from .env_factory import eval_env_kwargs, make_sb3_env, policy_env_fields
@@ -126,6 +127,7 @@ def _make_eval_callback_class():
             self.rows: list[dict[str, Any]] = []
             self.npz = {"timesteps": [], "results": [], "ep_lengths": []}
             self.t0 = time.perf_counter()
+            self.seconds = 0.0  # spent in evaluations
 
         def _on_training_start(self) -> None:
             self.t0 = time.perf_counter()
@@ -138,8 +140,10 @@ def _make_eval_callback_class():
             return True
 
         def _run_eval(self) -> None:
+            start = time.perf_counter()
             summary, records = evaluate_model(self.model, self.env_id, self.env_kwargs,
                                               self.meta, self.episodes, self.seed)
+            self.seconds += time.perf_counter() - start
             means = brief(summary)
             row = {"timesteps": self.num_timesteps,
                    "wall_time_s": round(time.perf_counter() - self.t0, 2)}
@@ -188,12 +192,17 @@ def _make_eval_callback_class():
 
 
 def _make_progress_callback_class():
-    from stable_baselines3.common.callbacks import ProgressBarCallback
+    BaseCallback = _callbacks_base()
 
-    class _ProgressBar(ProgressBarCallback):
-        """SB3's progress bar (tqdm + rich), stopped at its total: PPO collects whole
-        rollouts of ``n_steps x n_envs`` steps, so training runs past ``n_timesteps`` unless
-        it is a multiple of that, and SB3's bar counts on past its own total."""
+    class _ProgressBar(BaseCallback):
+        """The training bar (:class:`abb_gym.progress.ProgressBar`: plain lines in a log),
+        stopped at its total: PPO collects whole rollouts of ``n_steps x n_envs`` steps, so
+        training runs past ``n_timesteps`` unless it is a multiple of that, and SB3's own bar
+        counts on past its total."""
+
+        def _on_training_start(self) -> None:
+            total = self.locals["total_timesteps"] - self.model.num_timesteps
+            self.pbar = ProgressBar(total=total, desc="train", unit="step")
 
         def _on_step(self) -> bool:
             left = self.pbar.total - self.pbar.n
@@ -201,7 +210,29 @@ def _make_progress_callback_class():
                 self.pbar.update(min(self.training_env.num_envs, left))
             return True
 
+        def _on_training_end(self) -> None:
+            self.pbar.close()
+
     return _ProgressBar
+
+
+def _make_throughput_class():
+    BaseCallback = _callbacks_base()
+
+    class _Throughput(BaseCallback):
+        """When the first environment step of training ended and how many steps it made:
+        that step compiles the environment's kernel when it is not cached yet (20-110 s),
+        which a throughput must not include."""
+
+        def _on_training_start(self) -> None:
+            self.first: tuple[float, int] | None = None
+
+        def _on_step(self) -> bool:
+            if self.first is None:
+                self.first = (time.perf_counter(), int(self.num_timesteps))
+            return True
+
+    return _Throughput
 
 
 def _make_checkpoint_class():
@@ -232,9 +263,23 @@ def Checkpoints(*args, **kwargs):
     return _make_checkpoint_class()(*args, **kwargs)
 
 
-def ProgressBar():
+def TrainingBar():
     """The training progress bar (built lazily: SB3 is imported on first use)."""
     return _make_progress_callback_class()()
+
+
+def training_throughput(steps: int, wall: float, first: tuple[float, int] | None,
+                        start: float, evaluation_s: float) -> float:
+    """Environment steps per second of training proper [1/s]: the steps after the first
+    one over the time after it (``first``: its end time and the step count then, or None),
+    less ``evaluation_s`` seconds of test-set evaluations, whose first one compiles the
+    evaluation environment.  The first step compiles the training environment's kernel when
+    it is not cached: counted in, it made a 60 s training look 3x slower than it ran."""
+    if first is None:
+        return steps / wall if wall > 0 else math.nan
+    t_first, n_first = first
+    seconds = wall - (t_first - start) - evaluation_s
+    return (steps - n_first) / seconds if seconds > 0 and steps > n_first else math.nan
 
 
 def TestSetEvalCallback(*args, **kwargs):
@@ -251,6 +296,9 @@ class RunResult:
     env_steps: int
     env_steps_per_s: float
     evaluation: dict[str, Any]
+    #: env-steps/s without the first step (the compile) and the evaluations
+    #: (:func:`training_throughput`)
+    training_steps_per_s: float = math.nan
 
 
 def _versions() -> dict[str, str]:
@@ -335,7 +383,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
 
     :param seed: seed of everything random in training (>= 0).
     :param run_dir: output folder (default :func:`default_run_dir`); created if missing.
-    :param progress: show SB3's progress bar (tqdm + rich), ending at ``cfg.n_timesteps``
+    :param progress: show a progress bar (:mod:`abb_gym.progress`), ending at ``cfg.n_timesteps``
         (training itself ends with the rollout that reaches it).
     :param torch_threads: ``torch.set_num_threads`` (1 is fastest for these small networks on
         a busy 2-core machine); None leaves torch's default.
@@ -406,7 +454,9 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         meta["imitate"] = clone(model, env, cfg.imitate, cfg.env_id, cfg.env_kwargs,
                                 ppo_kw.get("gamma", 0.99))
     write_config(run_dir, cfg, meta)
-    callbacks = []
+    # first: the first step's end is taken before any other callback runs (an evaluation)
+    throughput = _make_throughput_class()()
+    callbacks = [throughput]
     eval_cb = TestSetEvalCallback(cfg.env_id, eval_kwargs, run_dir, cfg.eval_freq,
                                   cfg.eval_episodes, cfg.eval_seed, meta,
                                   verbose=max(verbose, int(progress is False)), algo=cfg.algo)
@@ -418,15 +468,17 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
         callbacks.append(Checkpoints(max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                      run_dir / "checkpoints", meta, cfg.algo))
     if progress:
-        callbacks.append(ProgressBar())
+        callbacks.append(TrainingBar())
     t0 = time.perf_counter()
     model.learn(cfg.n_timesteps, callback=CallbackList(callbacks), progress_bar=False,
                 tb_log_name=tensorboard_run_name(cfg, seed))
     wall = time.perf_counter() - t0
     steps = int(model.num_timesteps)
     save_model_files(run_dir, model, cfg.env_id, meta["policy_env"]["kind"], cfg.algo)
+    rate = training_throughput(steps, wall, throughput.first, t0, eval_cb.seconds)
     meta.update({"wall_time_s": round(wall, 1), "env_steps": steps,
                  "env_steps_per_s": round(steps / wall, 1),
+                 "training_steps_per_s": None if math.isnan(rate) else round(rate, 1),
                  "evaluations": eval_cb.rows[-1] if eval_cb.rows else None})
     evaluation: dict[str, Any] = {}
     if final_eval:
@@ -442,7 +494,7 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     from .agent_files import write_manifest
     write_manifest(run_dir, observation_names=venv.unwrapped.setup.obs_names)
     env.close()
-    return RunResult(run_dir, wall, steps, steps / wall, evaluation)
+    return RunResult(run_dir, wall, steps, steps / wall, evaluation, rate)
 
 
 # ---------------------------------------------------------------------- command line
