@@ -37,34 +37,27 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .._numba import njit
-from . import elementary as el
 
 TWO_PI = 2.0 * math.pi
 
 
 @njit(cache=True, inline="always")
 def wrap_angle(d):
-    """Angle wrapped to (-pi, pi] (``np.floor``: a float, where ``math.floor`` would make an
-    integer, a conversion that stops vectorisation without AVX-512)."""
-    return d - TWO_PI * np.floor((d + math.pi) / TWO_PI)
+    """Angle wrapped to (-pi, pi]."""
+    return d - TWO_PI * math.floor((d + math.pi) / TWO_PI)
 
 
 @njit(cache=True, inline="always")
 def pair_geometry(phi_i, phi_j, big_r, reach):
-    """(penetration [m], d chord / d(ph_j - ph_i) [m], sin(|d|/2)) of a ball pair.  The sine
-    and cosine are :func:`abb_gym.physics.elementary.sincos` (no library call: the contact
-    loops vectorise)."""
+    """(penetration [m], d chord / d(ph_j - ph_i) [m], sin(|d|/2)) of a ball pair."""
     d = wrap_angle(phi_j - phi_i)
     half = 0.5 * abs(d)
-    sh, ch = el.sincos(half)
-    pen = reach - 2.0 * big_r * sh
-    dchord = big_r * ch
+    pen = reach - 2.0 * big_r * math.sin(half)
+    dchord = big_r * math.cos(half)
     if d < 0.0:
         dchord = -dchord
-    return pen, dchord, sh
+    return pen, dchord, math.sin(half)
 
 
 @njit(cache=True, inline="always")
@@ -122,7 +115,7 @@ def neighbour_reach_angle(radii, big_r: float) -> float:
 @njit(cache=True, inline="always")
 def mod_turn(a):
     """``a`` [rad] reduced to [0, 2 pi) (floor, which vectorises)."""
-    return a - TWO_PI * np.floor(a * (1.0 / TWO_PI))
+    return a - TWO_PI * math.floor(a * (1.0 / TWO_PI))
 
 
 @njit(cache=True, inline="always")
@@ -160,7 +153,7 @@ def contact_energy(q, b, col_r, big_r, k):
 
 
 @njit(cache=True, inline="always")
-def pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k):
+def _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k):
     """k (1/m_i + 1/m_j) [1/s^2] of the pair (i, j) of lane ``l`` if it touches, else 0."""
     pen, dchord, sh = pair_geometry(s[3 + i, l], s[3 + j, l], big_r,
                                     b[i, col_r, l] + b[j, col_r, l])
@@ -189,7 +182,7 @@ def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta, reach_angle=-1.0
     second = 0.0
     if reach_angle >= 0.0 and n >= 4 and ring_holds(s, l, n, reach_angle):
         for j in (n - 1 if i == 0 else i - 1, 0 if i == n - 1 else i + 1):
-            w2 = pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
+            w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
             if w2 > first:
                 second = first
                 first = w2
@@ -198,7 +191,7 @@ def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta, reach_angle=-1.0
     else:
         for j in range(n):
             if j != i:
-                w2 = pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
+                w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
                 if w2 > first:
                     second = first
                     first = w2

@@ -1,8 +1,7 @@
-"""Elementary functions that the compiler can vectorise: sin, cos, exp, tanh, log without calls.
+"""Elementary functions that the compiler can vectorise: sin, cos, exp, tanh without calls.
 
-The equations of motion need sin and cos of the rotor and ball angles (and of the pair angles
-of ball-ball contact), tanh of the smoothed rolling resistance and log10 and 10^y of the fluid
-drag law's c_d(Re) at every right-hand side.  Calls into the C library block LLVM's loop
+The equations of motion need sin and cos of the rotor and ball angles and tanh of the smoothed
+rolling resistance at every right-hand side.  Calls into the C library block LLVM's loop
 vectoriser, so the compiled kernels evaluate them with the branch-free polynomials below
 (argument reduction plus the fdlibm minimax polynomials), which vectorise across environments
 and give the same result in every path (single environment, vector environment, ``simulate``).
@@ -22,10 +21,6 @@ function               arguments                     error
                                                      a zero of the function (absolute 4.5e-16)
 :func:`exp_bounded`    ``[-708, 709]``               <= 2 ulp
 :func:`tanh`           all finite                    <= 6 ulp relative
-:func:`log_normal`     positive normal numbers       <= 1 ulp
-:func:`log10_normal`   positive normal numbers       <= 2 ulp
-:func:`exp10_bounded`  ``|y| <= 2``                  <= 8 ulp (the rounding of y ln 10 adds
-                                                     about ``2.3 |y|`` ulp to exp's 2)
 =====================  ============================  ==========================================
 
 **Vectorisation needs two LLVM options**, set here when the module loads (they are process
@@ -68,8 +63,8 @@ from .._numba import njit
 _llvm.set_option("abb_gym", "-unroll-threshold=2000")
 _llvm.set_option("abb_gym", "-force-vector-interleave=2")
 
-__all__ = ["sincos", "exp_bounded", "tanh", "log_normal", "log10_normal", "exp10_bounded",
-           "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like", "is_single"]
+__all__ = ["sincos", "exp_bounded", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like",
+           "is_single"]
 
 SINCOS_LIMIT = 1.6e6
 SINCOS_LIMIT_F32 = 1.0e3
@@ -251,57 +246,6 @@ def exp_bounded(y):
     """e^y for y in [-708, 709] without library calls (<= 2 ulp)."""
     scale, p = _expm1_reduced(y)
     return scale + scale * p
-
-
-# log: fdlibm __ieee754_log's polynomial of s = f / (2 + f) on sqrt(1/2) <= 1 + f < sqrt(2)
-_LG1 = 6.666666666666735130e-01
-_LG2 = 3.999999999940941908e-01
-_LG3 = 2.857142874366239149e-01
-_LG4 = 2.222219843214978396e-01
-_LG5 = 1.818357216161805012e-01
-_LG6 = 1.531383769920937332e-01
-_LG7 = 1.479819860511658591e-01
-_SQRT_HALF_BITS = 0x3FE6A09E667F3BCD  # the bits of sqrt(1/2)
-_ONE_BITS = 0x3FF0000000000000
-_MANTISSA = 0x000FFFFFFFFFFFFF
-_TWO52_BITS = 0x4330000000000000  # 2^52: a whole number below 2^52 in its low mantissa bits
-_LN10 = 2.30258509299404568402
-_INV_LN10 = 4.34294481903251827651e-01
-
-
-@njit(cache=True, inline="always")
-def log_normal(x):
-    """ln x for a positive normal float64 x (no zero, subnormal, infinity or NaN: the caller
-    bounds it) without library calls, fdlibm's method: x = 2^k (1 + f) with sqrt(1/2) <= 1 + f
-    < sqrt(2), ln(1 + f) from the polynomial in s = f / (2 + f), k ln 2 in two parts.  The
-    exponent k and the mantissa come from the bits (integer operations that vectorise), k is
-    made a float without an integer conversion (AVX2 has none from 64-bit integers): its
-    biased value goes into the mantissa of 2^52."""
-    # shift the bits so that the exponent field counts from sqrt(1/2), not from 1
-    ix = _to_bits(x) + (_ONE_BITS - _SQRT_HALF_BITS)
-    k = _from_bits(_TWO52_BITS | (ix >> 52), x) - (4503599627370496.0 + 1023.0)
-    f = _from_bits((ix & _MANTISSA) + _SQRT_HALF_BITS, x) - 1.0
-    s = f / (2.0 + f)
-    z = s * s
-    w = z * z
-    t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
-    t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
-    r = t2 + t1
-    hfsq = 0.5 * f * f
-    return k * _LN2_HI - ((hfsq - (s * (hfsq + r) + k * _LN2_LO)) - f)
-
-
-@njit(cache=True, inline="always")
-def log10_normal(x):
-    """log10 x for a positive normal float64 x without library calls (:func:`log_normal`
-    times 1 / ln 10)."""
-    return log_normal(x) * _INV_LN10
-
-
-@njit(cache=True, inline="always")
-def exp10_bounded(y):
-    """10^y for y in [-307, 307] without library calls (:func:`exp_bounded` of y ln 10)."""
-    return exp_bounded(y * _LN10)
 
 
 @njit(cache=True, inline="always")

@@ -79,8 +79,6 @@ from dataclasses import dataclass
 import numpy as np
 from .._numba import njit
 
-from . import elementary as el
-
 __all__ = ["Fluid", "FLUIDS", "DRAG_LAWS", "fluid_properties", "drag_coefficient",
            "law_coefficients", "stokes_drag_coefficient", "SPANNAN_6_9_PRINTED", "RE_STOKES",
            "RE_PLATEAU", "T_NOMINAL", "T_RANGE"]
@@ -244,21 +242,17 @@ def drag_coefficient(re, law: str = "spannan_2021", stokes: float = 0.0, plateau
 def race_drag(u, law, klin, kquad, re_per_speed, a0, a1, a2, a3, plateau):
     """(drag force [N] along +u, d force / du [N s/m]) on one ball moving at ``u`` [m/s]
     relative to the fluid.  ``klin`` = C (pi/4) rho nu r, ``kquad`` = rho pi r^2 / 2,
-    ``re_per_speed`` = 2 r / nu [s/m]; a0..a3 the cubic of log10 c_d over log10 Re.
-
-    Without branches or library calls: the three regimes are each computed and the one that
-    holds is selected, log10 and 10^Y are :mod:`abb_gym.physics.elementary`'s (log10 of Re
-    held in [10, 2e4], where the cubic applies), so that the lane loops of the kernels that
-    call it vectorise (a call of the C library's log10 or pow keeps a loop scalar)."""
-    au = abs(u)
-    re = au * re_per_speed
-    lg = el.log10_normal(np.float64(min(max(re, RE_STOKES), RE_PLATEAU)))
-    cd = el.exp10_bounded(a0 + lg * (a1 + lg * (a2 + lg * a3)))
+    ``re_per_speed`` = 2 r / nu [s/m]; a0..a3 the cubic of log10 c_d over log10 Re."""
+    if law == LAW_STOKES:
+        return klin * u, klin
+    re = abs(u) * re_per_speed
+    if re <= RE_STOKES:
+        return klin * u, klin
+    if re > RE_PLATEAU:
+        f = kquad * plateau * abs(u)
+        return f * u, 2.0 * f
+    lg = math.log10(re)
+    cd = 10.0 ** (a0 + lg * (a1 + lg * (a2 + lg * a3)))
     slope = a1 + lg * (2.0 * a2 + 3.0 * lg * a3)  # dY/dL: d(c_d u|u|)/du = c_d |u| (2 + Y')
-    f = kquad * cd * au
-    fp = kquad * plateau * au
-    linear = law == LAW_STOKES or re <= RE_STOKES
-    top = re > RE_PLATEAU
-    force = klin * u if linear else (fp * u if top else f * u)
-    rate = klin if linear else (2.0 * fp if top else f * (2.0 + slope))
-    return force, rate
+    f = kquad * cd * abs(u)
+    return f * u, f * (2.0 + slope)

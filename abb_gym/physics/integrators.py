@@ -218,7 +218,7 @@ def _etdrk4_step(t, h, s, p, b, d, k, tmp, tt, work, lam, coef, active, nb, spec
     L = mdl.lanes_of(s, spec)
     nu, na, nbb, nc = k[0], k[1], k[2], k[3]
     a = k[4]
-    mdl.drag_rates_block(t, s, p, b, d, lam, work, nb, spec)
+    mdl.drag_rates_block(t, s, p, b, d, lam, nb, spec)
     for j in range(n):
         for l in range(L):
             e2, e, q, f1, f2, f3 = etd_coefficients(-h[l] * lam[j, l])

@@ -157,15 +157,6 @@ SPEC_ENVELOPE = 16  # a motor with a torque-speed envelope
 # not an effect but a layout: every block has one lane (a single environment), so that the
 # lane count is a compile-time constant too (lanes_of)
 SPEC_ONE_LANE = 32
-# which extended effects exist (each with SPEC_EXT): gravity, ball-ball contact, a fluid drag
-# law, friction.  Under SPEC_EXT alone each would be compiled and switched per lane, and a
-# vectorised lane loop computes every switched term in every lane and then selects (LLVM's
-# if-conversion): the washer's right-hand side computed the friction law of its twelve balls
-# (an exp and a tanh each) although it has no friction
-SPEC_GRAVITY = 64
-SPEC_CONTACT = 128
-SPEC_FLUID = 256
-SPEC_FRICTION = 512
 
 
 def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -360,13 +351,6 @@ def rows_of(s, nb, spec):
 
 
 @njit(cache=True, inline="always")
-def _has(spec, effect):
-    """Whether the kernel of ``spec`` has the extended ``effect`` (a ``SPEC_*`` bit that comes
-    with ``SPEC_EXT``): a compile-time constant under a literal ``spec``."""
-    return (spec & SPEC_EXT) != 0 and (spec & effect) != 0
-
-
-@njit(cache=True, inline="always")
 def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
     """One ball's terms of the equations (module docstring), from scalars only, so that the
     lane loop that calls it vectorises: (col_x, col_y, c_i, its Jt share, its Sx and Cy
@@ -554,10 +538,10 @@ def _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec):
     stg = ds[0, l] if ecc else el.like(x, 0.0)
     ctg = ds[1, l] if ecc else el.like(x, 0.0)
     big_r = p[P_R, l]
-    grav = _has(spec, SPEC_GRAVITY) and p[P_GRAV, l] != 0.0
-    touch = _has(spec, SPEC_CONTACT) and p[P_KC, l] != 0.0
-    fric = _has(spec, SPEC_FRICTION) and p[P_FRIC, l] != 0.0
-    dlaw = p[P_DLAW, l] if _has(spec, SPEC_FLUID) else el.like(x, 0.0)
+    grav = ext and p[P_GRAV, l] != 0.0
+    touch = ext and p[P_KC, l] != 0.0
+    fric = ext and p[P_FRIC, l] != 0.0
+    dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
     geometry = (big_r, p[P_UREG, l], p[P_E, l], p[P_GAM, l], stg, ctg, p[P_GX, l],
                 p[P_GY, l])
     law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
@@ -656,14 +640,13 @@ def _add_ball(acc, terms, inv, motor):
 
 
 @njit(cache=True, inline="always")
-def _solve_rotor(acc, lane, p, l, grav, motor):
+def _solve_rotor(acc, lane, p, l, ext, motor):
     """(x'', y'', th'') of lane ``l`` from its sums ``acc`` and ``lane`` (:func:`_rotor_start`):
-    gravity's rotor terms (where ``grav``, the kernel's gravity bit, and the lane's gravity
-    are on), the 2x2 (prescribed spin) or 3x3 (motor) system."""
+    gravity's rotor terms, the 2x2 (prescribed spin) or 3x3 (motor) system."""
     (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
     alpha = lane[2]
     total = p[P_MASS, l]
-    if grav and p[P_GRAV, l] != 0.0:
+    if ext and p[P_GRAV, l] != 0.0:
         gx = p[P_GX, l]
         gy = p[P_GY, l]
         fx += total * gx
@@ -758,13 +741,13 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     order are the same either way, so the results are the same bits."""
     L = lanes_of(s, spec)
     nq = 3 + nb
-    grav = _has(spec, SPEC_GRAVITY)
+    ext = (spec & SPEC_EXT) != 0
     ecc = (spec & SPEC_ECC) != 0
     motor = (spec & SPEC_MOTOR) != 0
     envelope = (spec & SPEC_ENVELOPE) != 0
     # pair forces first, into the balls' rows of ds: the contact's radial part loads the race
     # (friction, rolling); and the race's sin and cos of th + gam into ds rows 0 and 1
-    if _has(spec, SPEC_CONTACT):
+    if ext:
         _contacts(s, p, b, ds, work, nb, nq, L)
     if ecc:
         for l in range(L):
@@ -782,7 +765,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
                 work[i, W_BY, l] = terms[11]
                 work[i, W_BTH, l] = terms[12]
                 acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
-            ax, ay, ath = _solve_rotor(acc, lane, p, l, grav, motor)
+            ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
             _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
         return
     for i in range(nb):
@@ -798,7 +781,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
                      work[i, W_FY, l], work[i, W_FTH, l], work[i, W_FI, l], work[i, W_BX, l],
                      work[i, W_BY, l], work[i, W_BTH, l])
             acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
-        ax, ay, ath = _solve_rotor(acc, lane, p, l, grav, motor)
+        ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
         _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
 
 
@@ -811,10 +794,6 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
     spec = 0
     if np.any(p[..., P_EXT] != 0.0):
         spec |= SPEC_EXT
-        for bit, column in ((SPEC_GRAVITY, P_GRAV), (SPEC_CONTACT, P_KC), (SPEC_FLUID, P_DLAW),
-                            (SPEC_FRICTION, P_FRIC)):
-            if np.any(p[..., column] != 0.0):
-                spec |= bit
     if np.any(p[..., P_ECC] != 0.0):
         spec |= SPEC_ECC
     if np.any(p[..., P_ROLL] != 0.0):
@@ -828,9 +807,7 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
 
 _SPEC_WORDS = ((SPEC_EXT, "extended effects"), (SPEC_ECC, "race eccentricity"),
                (SPEC_ROLL, "rolling resistance"), (SPEC_MOTOR, "motor"),
-               (SPEC_ENVELOPE, "motor envelope"), (SPEC_ONE_LANE, "one lane"),
-               (SPEC_GRAVITY, "gravity"), (SPEC_CONTACT, "ball contact"),
-               (SPEC_FLUID, "fluid drag"), (SPEC_FRICTION, "friction"))
+               (SPEC_ENVELOPE, "motor envelope"), (SPEC_ONE_LANE, "one lane"))
 
 
 def describe_spec(spec: int) -> str:
@@ -899,7 +876,7 @@ def total_energy(s, p, b):
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
-def drag_rates_block(t, s, p, b, d, lam, work, nb, spec):
+def drag_rates_block(t, s, p, b, d, lam, nb, spec):
     """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state rows x
     lanes; every other row 0): for ball i, lam[ph_i'] = (beta_i + d(resisting force) /
     d(ph_i')) / I_i, the race drag plus
@@ -919,36 +896,23 @@ def drag_rates_block(t, s, p, b, d, lam, work, nb, spec):
     This is the stiff, nearly diagonal part of the Jacobian (the coupling through the rotor,
     of relative size m_i / M, is left out); the exponential integrator treats it exactly and
     the step-size rule of the explicit methods bounds h * lam.  Lanes, and arrays that must
-    not overlap, as in :func:`accelerations_block`; ``work`` its scratch (the pairs' contact
-    rates).
-
-    **Loop order.**  Like the split passes of :func:`accelerations_block`, each pass is a
-    loop over lanes (per ball the drag, rolling and friction rates; per neighbour pair its
-    contact term; per ball its contact rate), so that it vectorises; a lane whose neighbour
-    list does not hold (:func:`~abb_gym.physics.contact.ring_holds`) takes every pair
-    (:func:`~abb_gym.physics.contact.contact_rate_lane`).  Each lane's operations are those of
-    one lane at a time: the two largest pair terms of a ball are, where the neighbour list
-    holds, its two neighbour terms, whose sum is the same in either order, so the rates are
-    the same bits."""
+    not overlap, as in :func:`accelerations_block`."""
     L = lanes_of(s, spec)
     nq = 3 + nb
+    ext = (spec & SPEC_EXT) != 0
     roll = (spec & SPEC_ROLL) != 0
     motor = (spec & SPEC_MOTOR) != 0
-    fluid = _has(spec, SPEC_FLUID)
-    fric = _has(spec, SPEC_FRICTION)
-    grav = _has(spec, SPEC_GRAVITY)
-    for j in range(nq + 3):
-        for l in range(L):
+    for l in range(L):
+        if motor:
+            th = s[2, l]
+            w = s[nq + 2, l]
+        else:
+            th, w, _ = dl.prescribed_law(t[l] - d[dl.D_T0, l], d[dl.D_TH0, l], d[dl.D_W0, l],
+                                         d[dl.D_ALPHA, l])
+        for j in range(2 * nq):
             lam[j, l] = 0.0
-    for i in range(nb):
-        for l in range(L):
-            if motor:
-                th = s[2, l]
-                w = s[nq + 2, l]
-            else:
-                th, w, _ = dl.prescribed_law(t[l] - d[dl.D_T0, l], d[dl.D_TH0, l],
-                                             d[dl.D_W0, l], d[dl.D_ALPHA, l])
-            big_r = p[P_R, l]
+        big_r = p[P_R, l]
+        for i in range(nb):
             m = b[i, B_MASS, l]
             rate = b[i, B_BETA, l]
             dph = s[nq + 3 + i, l]
@@ -956,55 +920,24 @@ def drag_rates_block(t, s, p, b, d, lam, work, nb, spec):
                 tnh = el.tanh(big_r * dph / p[P_UREG, l])
                 rate += (b[i, B_MUR, l] * m * big_r ** 3 * (w + dph) ** 2 * (1.0 - tnh * tnh)
                          / p[P_UREG, l])
-            if fluid and p[P_DLAW, l] != 0.0:
-                drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
-                                                b[i, B_KQUAD, l], b[i, B_REU, l],
-                                                p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
-                                                p[P_CD3, l], p[P_CDINF, l])
-                rate += big_r * big_r * slope
-            if fric and p[P_FRIC, l] != 0.0:
-                normal = m * big_r * (w + dph) ** 2
-                if grav and p[P_GRAV, l] != 0.0:
-                    sp, cp = el.sincos(th + s[3 + i, l])
-                    normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
-                rate += big_r * big_r * abs(normal) * friction_secant(
-                    big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+            if ext:
+                if p[P_DLAW, l] != 0.0:
+                    drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
+                                                    b[i, B_KQUAD, l], b[i, B_REU, l],
+                                                    p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
+                                                    p[P_CD3, l], p[P_CDINF, l])
+                    rate += big_r * big_r * slope
+                if p[P_FRIC, l] != 0.0:
+                    normal = m * big_r * (w + dph) ** 2
+                    if p[P_GRAV, l] != 0.0:
+                        sp, cp = el.sincos(th + s[3 + i, l])
+                        normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
+                    rate += big_r * big_r * abs(normal) * friction_secant(
+                        big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
             lam[nq + 3 + i, l] = rate / b[i, B_II, l]
-    if _has(spec, SPEC_CONTACT) and nb >= 2:
-        _contact_rates(s, p, b, lam, work, nb, nq, L)
-
-
-@njit(cache=True, inline="always")
-def _contact_rates(s, p, b, lam, work, nb, nq, L):
-    """The contact rates of :func:`drag_rates_block` added to the balls' rows of ``lam``: per
-    neighbour pair (the pairs of :func:`_contacts`) its term k (1/m_i + 1/m_j) where it
-    touches, per ball sqrt(sum of its two neighbour terms) max(1, 2 zeta)
-    (:func:`~abb_gym.physics.contact.contact_rate_lane`), every pair where the neighbour list
-    does not hold."""
-    pairs = 1 if nb == 2 else nb
-    for k in range(pairs):
-        lo = 0 if k == nb - 1 else k
-        hi = nb - 1 if k == nb - 1 else k + 1
-        for l in range(L):
-            work[k, W_PQ, l] = _contact.pair_rate2(s, l, lo, hi, b, B_RADIUS, B_MEFF, p[P_R, l],
-                                                   p[P_KC, l])
-    for l in range(L):
-        work[0, W_RING, l] = 1.0 if nb < 4 or _contact.ring_holds(s, l, nb, p[P_REACH, l]) \
-            else 0.0
-    for i in range(nb):
-        for l in range(L):
-            if nb == 2:
-                sum2 = work[0, W_PQ, l] + 0.0
-            else:
-                sum2 = work[nb - 1 if i == 0 else i - 1, W_PQ, l] + work[i, W_PQ, l]
-            rate = math.sqrt(sum2) * max(1.0, 2.0 * p[P_ZC, l])
-            on = p[P_KC, l] != 0.0 and work[0, W_RING, l] != 0.0
-            lam[nq + 3 + i, l] += rate if on else 0.0
-    for l in range(L):
-        if p[P_KC, l] != 0.0 and work[0, W_RING, l] == 0.0:
-            for i in range(nb):
+            if ext and p[P_KC, l] != 0.0:
                 lam[nq + 3 + i, l] += _contact.contact_rate_lane(
-                    s, l, i, b, B_RADIUS, B_MEFF, p[P_R, l], p[P_KC, l], p[P_ZC, l],
+                    s, l, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l], p[P_ZC, l],
                     p[P_REACH, l])
 
 
@@ -1016,4 +949,4 @@ def drag_rates(t, s, p, b, d, lam, spec):
     tt = np.full(1, t)
     drag_rates_block(tt, s.reshape((ns, 1)), p.reshape((p.shape[0], 1)),
                      b.reshape((nb, b.shape[1], 1)), d.reshape((d.shape[0], 1)),
-                     lam.reshape((ns, 1)), np.zeros((nb, WORK_COLUMNS, 1)), nb, spec)
+                     lam.reshape((ns, 1)), nb, spec)
