@@ -60,3 +60,15 @@ def test_the_imitate_section_is_checked():
     with pytest.raises(TrainConfigError, match="belongs in"):
         TrainConfig.from_mapping(SPEED, {"n_envs": 2, "n_timesteps": 10,
                                          "imitate": {"policy": "baseline:knots"}})
+
+
+def test_the_imitate_section_survives_overrides_and_the_written_config():
+    # a run's config.yml and a command-line override must keep cloning (a dropped section
+    # trains plain PPO without a word)
+    cfg = TrainConfig.from_mapping(SPEED, {"n_envs": 2, "n_timesteps": 10},
+                                   extra={"imitate": {"policy": "baseline:knots",
+                                                      "epochs": 7}})
+    assert cfg.with_overrides(n_timesteps=20, eval_freq=5).imitate["epochs"] == 7
+    data = cfg.to_file_data()
+    again = TrainConfig.from_mapping(SPEED, data[SPEED], extra=data["_abb_gym"])
+    assert again.imitate == cfg.imitate

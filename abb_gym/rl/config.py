@@ -467,6 +467,8 @@ class TrainConfig:
             out["curriculum"] = copy.deepcopy(self.curriculum)
         if self.init_from is not None:
             out["init_from"] = copy.deepcopy(self.init_from)
+        if self.imitate is not None:
+            out["imitate"] = copy.deepcopy(self.imitate)
         if self.algo != algorithm_of(self.policy):
             out["algo"] = self.algo
         return out
