@@ -206,3 +206,34 @@ def test_hand_rules_decide_on_constructed_cases():
         ended |= term | trunc
     assert ended[1] and not ended[0]  # the balanced load settled at spin; the other dropped
     assert obs[0, 0] < 0.5  # on its way down to the tumble
+
+
+def test_the_open_loop_floor_of_a_test_set():
+    """The floor of each episode is the balancer-off whirl at spin of the first load's excess
+    over the effective capacity: zero for a load that fits, that whirl otherwise (the load
+    read from the same seeded reset); a summary of a SpinRedistribute evaluation states it
+    and a run-up task's has none."""
+    from abb_gym.baselines.laundry import open_loop_floor
+    from abb_gym.evaluation.report import residual_floor
+
+    seeds = list(range(40))
+    floor = open_loop_floor(SPIN, "washer_reduced", "laundry_test", seeds)
+    env = gym.make_vec(SPIN, num_envs=len(seeds), vectorization_mode="vector_entry_point",
+                       scene="washer_reduced", preset="laundry_test")
+    env.reset(seed=seeds)
+    loads, sc = env.unwrapped.imbalances, env.unwrapped.setup.scene
+    c_eff = laundry.effective_capacity(sc)
+    fits = loads <= c_eff
+    assert fits.any() and (~fits).any()
+    assert np.all(floor[fits] == 0.0)
+    k = int(np.flatnonzero(~fits)[0])
+    whirl = rotor.reference_amplitudes(sc, sc.drive_operating_speed, loads[k] - c_eff)[1]
+    assert floor[k] == pytest.approx(whirl / 1e-3, rel=1e-12)  # mm
+    result = ev.EvaluationResult("baseline:ramp", SPIN, "washer_reduced", "laundry_test", 0,
+                                 episodes=[{"seed": s} for s in seeds])
+    stat = residual_floor(result)
+    assert stat["mean"] == pytest.approx(float(np.mean(floor)))
+    assert stat["ci_low"] <= stat["mean"] <= stat["ci_high"] and "C_eff" in stat["definition"]
+    other = ev.EvaluationResult("baseline:ramp", "abb_gym/RunUpSpeed-v0", "yoshida_odd",
+                                "test", 0, episodes=[{"seed": 0}])
+    assert residual_floor(other) is None

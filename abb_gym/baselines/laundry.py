@@ -25,7 +25,7 @@ from ..physics import drive_law as dl
 from ..physics import laundry
 from .baseline_policy import SpeedReferencePolicy, make_baseline
 
-__all__ = ["LaundryOracle", "ORACLE_NAME"]
+__all__ = ["LaundryOracle", "ORACLE_NAME", "open_loop_floor"]
 
 ORACLE_NAME = "laundry_oracle"
 
@@ -76,3 +76,41 @@ class LaundryOracle(SpeedReferencePolicy):
                                              np.ascontiguousarray(tables),
                                              np.ascontiguousarray(counts))
         return self._actions(ref, w)
+
+
+def open_loop_floor(env_id: str, scene: Any, preset: str, seeds, env_kwargs=None) -> np.ndarray:
+    """The open-loop floor of each episode ``seeds[k]`` of ``env_id`` on ``scene`` and
+    ``preset``, in the task's unit of length (mm on SpinRedistribute): the steady whirl at
+    the operating speed of the machine with its balancer off and the imbalance
+    ``max(0, U - C_eff)``, U the episode's first laundry load, ``C_eff`` the effective
+    capacity (:func:`abb_gym.physics.laundry.effective_capacity`).  A drive that never
+    redistributes keeps U, and balls that cancel at most ``C_eff`` leave that excess whatever
+    the speed profile (tests/test_spin.py holds the ramp and ``knots`` above it).  Computed on
+    the nominal machine (the episode's critical-speed scale moves the whirl at spin by under
+    1 %, the speed ratio being about 8).  ``env_kwargs``: further environment keywords."""
+    import gymnasium as gym
+
+    from ..physics import rotor
+
+    seeds = [int(s) for s in seeds]
+    kwargs = dict(env_kwargs or {})
+    kwargs.update(scene=scene, preset=preset)
+    env = gym.make_vec(env_id, num_envs=max(len(seeds), 1),
+                       vectorization_mode="vector_entry_point", **kwargs)
+    try:
+        if not seeds:
+            return np.zeros(0)
+        env.reset(seed=seeds)
+        setup = env.unwrapped.setup
+        loads = env.unwrapped.imbalances
+    finally:
+        env.close()
+    excess = np.maximum(loads - laundry.effective_capacity(setup.scene), 0.0)
+    unit = setup.reward_length_scale or 1.0
+    whirl = np.array([rotor.reference_amplitudes(setup.scene, setup.operating_speed, u)[1]
+                      if u > 0.0 else 0.0 for u in excess])
+    return whirl / unit
+
+
+open_loop_floor.definition = ("the steady whirl at spin of the laundry load in excess of the "
+                              "balancer's effective capacity, max(0, U - C_eff)")

@@ -37,7 +37,10 @@ class Task:
     speed-profile baselines (``baseline:*``, the tuner, ``replay:``) drive it; ``baselines_on``:
     the id a baseline runs on when this task's action cannot express it (None: this one).
     ``one_step``: an episode is one step (one action decides the whole run).
-    ``test_preset``: the held-out preset a trained agent is evaluated on."""
+    ``test_preset``: the held-out preset a trained agent is evaluated on.
+    ``residual_floor``: ``"module:function"`` of the task's open-loop floor, the least
+    residual a policy that never reacts can leave on given episodes (evaluation summaries
+    show it beside the policies; None: the task has none)."""
 
     env_id: str
     action: str
@@ -52,6 +55,7 @@ class Task:
     baselines_on: str | None = None
     one_step: bool = False
     test_preset: str = "test"
+    residual_floor: str | None = None
 
     @property
     def name(self) -> str:
@@ -117,7 +121,8 @@ SPIN_REDISTRIBUTE = register(Task(
     "the drum tumbles", single_class="abb_gym.envs.spin:SpinRedistributeEnv",
     vector_class="abb_gym.envs.spin:SpinRedistributeVectorEnv", default_scene="washer",
     default_preset="laundry", test_preset="laundry_test",
-    settings={"redistribution": {"enabled": True}}))
+    settings={"redistribution": {"enabled": True}},
+    residual_floor="abb_gym.baselines.laundry:open_loop_floor"))
 
 #: the id that tools default to
 DEFAULT_ENV_ID = RUN_UP_SPEED.env_id

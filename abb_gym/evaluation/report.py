@@ -94,9 +94,9 @@ def feedback_values(results: Sequence[EvaluationResult]) -> dict[str, dict]:
     return out
 
 
-def feedback_table(values: dict[str, dict]) -> str:
+def feedback_table(values: dict[str, dict], length_unit: str = "W_r/e") -> str:
     rows = [{"policy": name,
-             "residual: replay - policy [W_r/e]": cell(v["residual_vibration"]),
+             f"residual: replay - policy [{length_unit}]": cell(v["residual_vibration"]),
              "run-up time: replay - policy [s]": cell(v["run_up_time"]),
              "return: replay - policy": cell(v["return"])} for name, v in values.items()]
     return markdown_table(rows)
@@ -126,6 +126,27 @@ def family_table(columns: dict[str, EvaluationResult], keys: Sequence[str] = GAP
     return markdown_table(rows)
 
 
+def residual_floor(result: EvaluationResult) -> dict | None:
+    """The task's open-loop floor on ``result``'s episodes (:attr:`abb_gym.envs.tasks.Task.
+    residual_floor`), mean and 95 % interval in the task's unit, with its definition; None
+    when the task has none."""
+    import importlib
+
+    from ..envs import tasks
+    from .statistics import mean_interval
+
+    path = tasks.get(result.env_id).residual_floor
+    if path is None or not result.episodes:
+        return None
+    module, name = path.split(":")
+    fn = getattr(importlib.import_module(module), name)
+    values = fn(result.env_id, result.scene, result.preset,
+                [e["seed"] for e in result.episodes])
+    return {**mean_interval(values, nonnegative=True),
+            "definition": getattr(fn, "definition", ""),
+            "per_episode": [float(v) for v in values]}
+
+
 def write_report(results: Sequence[EvaluationResult], out: str | Path,
                  sweep: list[dict] | None = None) -> dict[str, Path]:
     """Write the files of the module docstring; returns their paths."""
@@ -144,11 +165,16 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
         head += ("Column env: the baselines that DwellProfile's one action cannot express "
                  "ran on RunUpSpeed, on the same machines (same preset and seeds).\n\n")
     text = head + summary_table(results) + "\n"
+    floor = residual_floor(first)
+    if floor is not None:
+        text += (f"\nOpen-loop floor: {cell(floor)} {first.length_unit} (mean [95 % CI] over "
+                 f"these episodes; the least residual a drive that never reacts can leave: "
+                 f"{floor['definition']}).\n")
     feedback = feedback_values(results)
     if feedback:
         text += ("\nFeedback value (paired over the same episodes; positive residual and "
                  "run-up time differences, and negative return differences, mean the policy "
-                 "beats its own open-loop replay):\n\n" + feedback_table(feedback) + "\n")
+                 "beats its own open-loop replay):\n\n" + feedback_table(feedback, first.length_unit) + "\n")
     rows = [e for r in results for e in r.episodes]
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
                "seed": first.seed, "reward_weights": first.reward_weights,
@@ -156,7 +182,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
                "metrics": {k: unit(k, results) for k in METRICS},
                "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
-               "feedback_value": feedback, "sweep": sweep or []}
+               "feedback_value": feedback, "open_loop_floor": floor, "sweep": sweep or []}
     recorded = [(r.policy, r.rollouts[min(r.rollouts)]) for r in results if r.rollouts]
     # every file beside its target first, then all renamed: a failure half-way leaves the
     # previous report as it was
