@@ -104,6 +104,27 @@ def test_dwell_profile_every_step_ends_and_resets():
         assert np.isfinite(rew).all()
 
 
+def test_info_keys_keep_only_the_episode_end_keys_and_the_same_steps():
+    """Training's adapter (info_keys=()) drops the per-step infos but keeps what SB3 reads at
+    an episode's end; observations and rewards are those of the adapter with every key."""
+    lean, full = make_sb3_env(SPEED, 2, SHORT, info_keys=()), make_sb3_env(SPEED, 2, SHORT)
+    for env in (lean, full):
+        env.seed(4)
+    assert np.array_equal(lean.reset(), full.reset())
+    rng = np.random.default_rng(0)
+    for step in range(6):
+        act = _actions(rng, 2)
+        o1, r1, d1, i1 = lean.step(act)
+        o2, r2, d2, i2 = full.step(act)
+        assert np.array_equal(o1, o2) and np.array_equal(r1, r2) and np.array_equal(d1, d2)
+        for a, b, done in zip(i1, i2, d1):
+            assert "reward_terms" in b and "reward_terms" not in a
+            if done:
+                assert np.array_equal(a["terminal_observation"], b["terminal_observation"])
+                assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+    assert d1.all()  # the 6-step episodes ended
+
+
 def test_truncation_can_be_treated_as_termination():
     env = make_sb3_env(SPEED, 1, SHORT, bootstrap_truncated=False)
     env.seed(0)

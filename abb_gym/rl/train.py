@@ -412,8 +412,11 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     run_dir.mkdir(parents=True, exist_ok=True)
     set_random_seed(seed)
 
+    # info_keys=(): nothing in training reads the per-step infos (VecMonitor keeps its own
+    # episode sums; the episode-end keys stay), and splitting them per sub-environment was
+    # the adapter's largest cost (abb-gym bench speed, the SB3 adapter row)
     venv = make_sb3_env(cfg.env_id, cfg.n_envs, cfg.env_kwargs,
-                        bootstrap_truncated=cfg.bootstrap_truncated)
+                        bootstrap_truncated=cfg.bootstrap_truncated, info_keys=())
     warm = None
     if cfg.init_from is not None:  # checked before any training
         from .warm_start import load_warm_start, warm_start_files
