@@ -99,7 +99,12 @@ from .specialise import Specialised, resolve_kernel
 __all__ = ["advance_block", "run_batch", "run_inputs", "Blocks", "lanes_per_block",
            "lane_order", "thread_parts", "parallel_threads", "ParallelCall"]
 
-# f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators
+# f rows: interval, step size limit, piece, step, failure time; then the whirl accumulators.
+# The accumulators (W_INT .. W_DMAX) and the synchronous demodulator (W_SYNC .. W_GAIN) are the
+# environments' measurement hook inside the integrator: what the reward's vibration and
+# residual terms and the 1x sensor integrate at every integrator step (a sample per control
+# interval would alias the whirl), set and read by the envs' compiled step (abb_gym.envs.kernel)
+# into the observation and the reward; the equations of motion never read them.
 (F_T0, F_T1, F_HMAX, F_TP, F_PE, F_H, F_TC, F_TT, F_TFAIL, W_INT, W_MAX, W_XS, W_YS,
  W_DMAX) = range(14)
 # the synchronous demodulator (:mod:`abb_gym.physics.sensors`), run when W_SYNC != 0: its
