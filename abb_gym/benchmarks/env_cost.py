@@ -209,6 +209,15 @@ def operation_count(ball_counts: Iterable[int]) -> dict[tuple[int, bool], int]:
     return out
 
 
+
+def _measure_and_close(cases: dict, rounds: int) -> tuple[dict, dict]:
+    """Interleaved CPU times of ``cases`` and their integrator steps; the cases closed."""
+    try:
+        return interleaved(cases, rounds), {k: _substeps(c) for k, c in cases.items()}
+    finally:
+        for c in cases.values():
+            c.close()
+
 def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: int = 7,
                      ops: dict | None = None) -> list[dict]:
     """The vector environment per ball count, contact off and on, against 2 balls without
@@ -226,12 +235,7 @@ def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: 
                 else None)
         if base is not None:
             cases["base"] = base
-        try:
-            res = interleaved(cases, rounds)
-            steps = {k: _substeps(c) for k, c in cases.items()}
-        finally:
-            for c in cases.values():
-                c.close()
+        res, steps = _measure_and_close(cases, rounds)
         ref = "base" if contact else 2
         for n in ball_counts:
             ratio = res[n]["cpu_us"] / res[ref]["cpu_us"]
@@ -258,12 +262,7 @@ def washer_row(num_envs: int = 256, rounds: int = 7, integrator: str | None = No
     kw = {} if integrator is None else {"integrator": integrator}
     cases = {"washer": _Case(_env("washer", num_envs, preset="nominal", **kw)),
              "yoshida_odd": _Case(_env("yoshida_odd", num_envs))}
-    try:
-        res = interleaved(cases, rounds)
-        steps = {k: _substeps(c) for k, c in cases.items()}
-    finally:
-        for c in cases.values():
-            c.close()
+    res, steps = _measure_and_close(cases, rounds)
     return {"num_envs": num_envs, "integrator": integrator or "default",
             "washer_cpu_us": round(res["washer"]["cpu_us"], 2),
             "yoshida_cpu_us": round(res["yoshida_odd"]["cpu_us"], 3),
