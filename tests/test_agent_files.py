@@ -160,11 +160,11 @@ def _foreign(name: str, donor: str) -> str:
 @pytest.mark.parametrize("name, donor, match", [
     ("vecnormalize.json", "runup_speed_spannan_cfrp",
      _foreign("vecnormalize.json", "runup_speed_spannan_cfrp")),
-    ("vecnormalize.json", "runup_torque_yoshida_odd",
-     _foreign("vecnormalize.json", "runup_torque_yoshida_odd")),
-    ("policy.safetensors", "runup_torque_yoshida_odd",
-     _foreign("policy.safetensors", "runup_torque_yoshida_odd")),
-    ("config.yml", "runup_torque_yoshida_odd", r"records env id .*RunUpSpeed.*RunUpTorque"),
+    ("vecnormalize.json", "dwell_profile_yoshida_odd",
+     _foreign("vecnormalize.json", "dwell_profile_yoshida_odd")),
+    ("policy.safetensors", "dwell_profile_yoshida_odd",
+     _foreign("policy.safetensors", "dwell_profile_yoshida_odd")),
+    ("config.yml", "dwell_profile_yoshida_odd", r"records env id .*RunUpSpeed.*DwellProfile"),
     ("config.yml", "runup_speed_spannan_cfrp", r"records scene 'yoshida_odd', config.yml "
                                                r"'spannan_cfrp'"),
     (MANIFEST, "runup_speed_spannan_cfrp", r"records scene 'spannan_cfrp'"),

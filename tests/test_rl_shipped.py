@@ -22,12 +22,11 @@ AGENTS = sorted(d.name for d in trained_dir().glob("*") if (d / "agent.yml").exi
 
 SHIPPED = ("dwell_profile_yoshida_odd", "runup_speed_spannan_cfrp",
            "runup_speed_spannan_cfrp_varied", "runup_speed_spannan_cfrp_varied_finetuned",
-           "runup_speed_yoshida_odd", "runup_speed_yoshida_odd_varied",
-           "runup_torque_yoshida_odd")
+           "runup_speed_yoshida_odd", "runup_speed_yoshida_odd_varied")
 
 
 def test_agents_are_shipped():
-    assert AGENTS == list(SHIPPED), f"expected the seven shipped agents {SHIPPED}"
+    assert AGENTS == list(SHIPPED), f"expected the six shipped agents {SHIPPED}"
 
 
 @pytest.mark.parametrize("name", AGENTS)
@@ -56,6 +55,22 @@ def test_shipped_agent_loads_and_runs(name):
     # one whole test episode on the evaluation's default environment (10 ms interval)
     rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **pol.env_kwargs)
     assert np.isfinite(rows[0]["return"])
+
+
+@pytest.mark.parametrize("name", AGENTS)
+def test_shipped_agent_reaches_the_operating_band_on_its_test_set(name):
+    """An agent that never completes a run-up is not shipped: on the first 4 episodes of its
+    own held-out test set (its env, scene, preset and reward weights, as ``agents/evaluate.py``
+    runs it; seed 0), at least half reach the operating speed and hold it in the band through
+    the settling window.  The shipped agents do so in 97-100 of the 100 test episodes of
+    agents/results/; the withdrawn RunUpTorque agent did in none."""
+    from abb_gym.rl.comparison import agent_setting
+    setting = agent_setting(name)
+    pol = load_policy(name, env_id=setting.env_id, scene=setting.scene)
+    rows = run_episodes(pol, setting.env_id, episodes=4, seed=0, scene=setting.scene,
+                        preset=setting.preset, **{**pol.env_kwargs, **setting.env_kwargs})
+    at_speed = [bool(r["at_speed"]) for r in rows]
+    assert sum(at_speed) >= 2, f"{name} on {setting.preset}: at speed {at_speed}"
 
 
 @pytest.mark.parametrize("name", AGENTS)

@@ -12,8 +12,9 @@ a real one would do worse); every test shows that no command creates it:
   one warning line naming the files, and scores exactly as the shipped safe agent; converted
   once, it loads without trust;
 * an rl_zoo3 run folder and a plain SB3 ``model.zip`` follow the same rule;
-* a network copied from another agent (RunUpTorque into RunUpSpeed) behind a re-fingerprinted
-  manifest is refused by name, not evaluated as a speed agent because the sizes fit.
+* a network of another environment behind a re-fingerprinted manifest (another shipped
+  agent's, or one recorded for RunUpTorque whose sizes fit a RunUpSpeed agent) is refused by
+  name, not evaluated as a speed agent because the sizes fit.
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ from abb_gym.rl.agent_files import MANIFEST, AgentError, file_fingerprint  # noq
 
 SPEED_ID = "abb_gym/RunUpSpeed-v0"
 SPEED = "runup_speed_yoshida_odd"
-TORQUE = "runup_torque_yoshida_odd"
+DWELL = "dwell_profile_yoshida_odd"
 PICKLES = ("model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl")
 
 
@@ -223,21 +224,43 @@ def _model_file(folder: Path) -> str:
     return "policy.safetensors" if (folder / "policy.safetensors").exists() else "model.zip"
 
 
-def test_another_agents_network_is_refused_by_its_env_id_and_action_kind(tmp_path, capsys):
-    """A RunUpTorque network copied into a RunUpSpeed agent, the manifest re-fingerprinted:
-    the sizes fit (6 observations, 1 action), so only what the file records can tell."""
+def _record_as_torque_network(folder: Path) -> str:
+    """The speed agent's own network recorded as a RunUpTorque one (env id and action kind in
+    its metadata, as a RunUpTorque agent's file records them): the sizes fit (6 observations,
+    1 action), so only what the file records can tell.  No RunUpTorque agent ships."""
+    from safetensors import safe_open
+    from safetensors.torch import save_file
+    path = folder / "policy.safetensors"
+    with safe_open(str(path), "pt") as fh:
+        meta, tensors = dict(fh.metadata()), {k: fh.get_tensor(k) for k in fh.keys()}
+    save_file(tensors, str(path), metadata={**meta, "env_id": "abb_gym/RunUpTorque-v0",
+                                            "action_kind": "torque"})
+    return "RunUpTorque"
+
+
+def _copy_dwell_network(folder: Path) -> str:
+    """The shipped DwellProfile agent's network (3 actions, another size)."""
+    name = _model_file(folder)
+    shutil.copy(trained_dir() / DWELL / name, folder / name)
+    return "DwellProfile"
+
+
+@pytest.mark.parametrize("plant", [_record_as_torque_network, _copy_dwell_network],
+                         ids=["torque-sizes-fit", "dwell-agent"])
+def test_another_agents_network_is_refused_by_its_env_id_and_action_kind(plant, tmp_path,
+                                                                         capsys):
+    """Another environment's network in a RunUpSpeed agent, the manifest re-fingerprinted."""
     folder = tmp_path / SPEED
     shutil.copytree(trained_dir() / SPEED, folder)
-    name = _model_file(folder)
-    shutil.copy(trained_dir() / TORQUE / name, folder / name)
-    retag(folder, name)
+    other = plant(folder)
+    retag(folder, _model_file(folder))
     with pytest.raises(AgentError) as err:
         load_policy(folder)
     msg = str(err.value)
-    assert "RunUpTorque" in msg and "RunUpSpeed" in msg and "another agent's" in msg, msg
+    assert other in msg and "RunUpSpeed" in msg and "another agent's" in msg, msg
     assert main(["evaluate", "--policy", f"ppo:{folder}", "--episodes", "1",
                  "--out", str(tmp_path / "eval")]) == 2
-    assert "RunUpTorque" in capsys.readouterr().err
+    assert other in capsys.readouterr().err
 
 
 def test_a_network_of_another_action_kind_is_named(tmp_path):

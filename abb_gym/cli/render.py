@@ -1,8 +1,8 @@
 """``abb-gym render``: one episode of a policy as a video (GIF or MP4).
 
     abb-gym render --policy baseline:knots --out out/render/knots.gif
-    abb-gym render --env abb_gym/RunUpTorque-v0 --policy ppo:runup_torque_yoshida_odd \\
-        --episode 3 --out out/render/torque.mp4 --fps 30
+    abb-gym render --env abb_gym/RunUpSpeed-v0 --policy ppo:runup_speed_yoshida_odd \\
+        --episode 3 --out out/render/speed.mp4 --fps 30
 
 Episode K with --seed S is the machine of test episode K of ``abb-gym evaluate --seed S``.
 Policies: ``baseline:NAME``, ``ppo:NAME|PATH``, ``replay:SPEC`` (as for evaluate).  A frame

@@ -181,7 +181,7 @@ def paired_gaps(a: EvaluationResult, b: EvaluationResult) -> dict:
 
 def env_note(columns: dict) -> str:
     """A sentence naming the environments when the table's families ran on different ones
-    (the oracle plans speed profiles on RunUpSpeed; the torque agent's baselines run on
+    (the oracle plans speed profiles on RunUpSpeed; a RunUpTorque agent's baselines run on
     RunUpTorque through its speed loop), all on the same machines."""
     envs = {label: r.env_id.split("/")[-1] for label, r in columns.items()}
     if len(set(envs.values())) == 1:
