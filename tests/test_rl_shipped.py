@@ -39,7 +39,8 @@ def test_shipped_agent_loads_and_runs(name):
     env_id, penv = meta["env_id"], meta["policy_env"]
     pol = load_policy(name, env_id=env_id, scene=penv["scene"])
     # the observation settings the agent needs (observe_balls, sync_vibration, frame_stack)
-    kwargs = {"scene": penv["scene"], "preset": "test",
+    from abb_gym.envs import tasks
+    kwargs = {"scene": penv["scene"], "preset": tasks.get(env_id).test_preset,
               "control_interval": penv["control_interval"], **pol.env_kwargs}
     env = make_native_env(env_id, 2, kwargs)
     assert pol.model.observation_space.shape == env.single_observation_space.shape
