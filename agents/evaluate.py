@@ -114,6 +114,16 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"{flag} {path} is not a file{hint}")
 
 
+def own_study(folder: Path) -> bool:
+    """An agent of SpinRedistribute: its comparison (rules, oracle, floor, two scenes) is
+    agents/spin_study.py's, not the run-up study's (a per-machine knots oracle)."""
+    import yaml
+
+    from abb_gym.envs.tasks import SPIN_REDISTRIBUTE
+    run = yaml.safe_load((folder / "config.yml").read_text()).get("_run", {})
+    return run.get("env_id") == SPIN_REDISTRIBUTE.env_id
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from abb_gym.evaluation.feedback_gap import GapStudy
@@ -125,8 +135,8 @@ def main(argv=None) -> int:
     from abb_gym.rl.agent import trained_dir
     from abb_gym.rl.comparison import compare_agent, training_section
     everything = not args.agents
-    agents = args.agents or sorted(d.name for d in trained_dir().iterdir()
-                                   if (d / "agent.yml").exists())
+    agents = args.agents or [d.name for d in sorted(trained_dir().iterdir())
+                             if (d / "agent.yml").exists() and not own_study(d)]
     try:
         check_args(args)
         # the oracle's searches and its replays with the balls elsewhere run there; the
