@@ -54,8 +54,9 @@ def test_shipped_agent_loads_and_runs(name):
     a = pol.act(obs, info)
     assert a.shape == (2,) + env.single_action_space.shape
     assert np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)
-    # one whole test episode on the evaluation's default environment (10 ms interval)
-    rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"], **pol.env_kwargs)
+    # one whole episode of its held-out preset
+    rows = run_episodes(pol, env_id, episodes=1, seed=0, scene=penv["scene"],
+                        preset=kwargs["preset"], **pol.env_kwargs)
     assert np.isfinite(rows[0]["return"])
 
 

@@ -26,8 +26,12 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default=tasks.DEFAULT_ENV_ID,
                    help=f"environment id (one of {', '.join(tasks.TASKS)})")
-    p.add_argument("--scene", default="yoshida_odd", help="scene name")
-    p.add_argument("--preset", default="test", help="environment preset")
+    p.add_argument("--scene", default=None,
+                   help="scene name (default: the environment's, yoshida_odd; washer for "
+                        "SpinRedistribute)")
+    p.add_argument("--preset", default=None,
+                   help="environment preset (default: the environment's held-out preset, test; "
+                        "laundry_test for SpinRedistribute)")
     p.add_argument("--policy", required=True, help="baseline:NAME, ppo:NAME|PATH or replay:SPEC")
     p.add_argument("--episode", type=int, default=0,
                    help="test episode K (the environment reset with seed + K)")
@@ -51,6 +55,9 @@ def default_out(scene: str, policy: str, episode: int) -> str:
 
 
 def run(args) -> int:
+    task = tasks.get(args.env)
+    args.scene = args.scene or task.default_scene
+    args.preset = args.preset or task.test_preset
     from ..evaluation.video import check_video, render_episode
     from .outputs import output_file
     if args.out is not None and not args.out.strip():  # not read as "the default path"

@@ -100,9 +100,16 @@ def agent_setting(agent: str | Path, preset: str | None = None) -> AgentSetting:
 
 def preset_configs(train_preset: str, scene: str) -> Path | None:
     """The configuration folder of baselines tuned on ``train_preset`` (``configs/<preset>``),
-    or None for ``train`` (the shipped ``configs/baselines``)."""
+    or None for ``train`` and wherever the shipped ``configs/baselines/<scene>.yaml`` was
+    tuned on ``train_preset`` (a scene used with one preset only, such as the laundry's)."""
+    import yaml
+
     from ..resources import shipped_folder
     if train_preset == "train":
+        return None
+    shipped = shipped_folder("baselines") / f"{scene}.yaml"
+    if shipped.is_file() and (yaml.safe_load(shipped.read_text()) or {}).get(
+            "preset") == train_preset:
         return None
     folder = shipped_folder("baselines").parent / train_preset
     if not (folder / "baselines" / f"{scene}.yaml").is_file():
