@@ -75,6 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="agents/results", help="report folder")
     p.add_argument("--pages", default=str(REPO / "docs" / "results"),
                    help="folder of the documentation pages: one per agent and an index")
+    from abb_gym.cli.evaluate import add_trust_argument
+    add_trust_argument(p)
     add_executor_arguments(p, resume=False)
     p.add_argument("--readme", nargs="?", type=Path, const=REPOSITORY_READMES, default=None,
                    metavar="FILE",
@@ -126,6 +128,9 @@ def own_study(folder: Path) -> bool:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.trust_pickle:  # as abb-gym's --trust-pickle: the worker processes trust them too
+        from abb_gym.resources import TRUST_PICKLE_ENV
+        os.environ[TRUST_PICKLE_ENV] = "1"
     from abb_gym.evaluation.feedback_gap import GapStudy
     from abb_gym.evaluation.results_pages import (COMPARISON_MARKERS, GAP_MARKERS,
                                                   TRAINING_MARKERS, replace_between_markers,

@@ -192,6 +192,12 @@ def test_the_agents_evaluation_script_runs_no_planted_pickle(tmp_path, capsys, m
     assert script.main([str(folder), "--episodes", "2", "--out", str(tmp_path / "out")]) != 0
     assert not marker.exists()
     assert "convert-agent" in capsys.readouterr().err
+    # --trust-pickle trusts them, as abb-gym's flag does: the planted code runs on loading
+    script.main([str(folder), "--episodes", "2", "--oracle-budget", "0",
+                 "--machine-oracle-budget", "0", "--baselines", "--pages", str(tmp_path / "p"),
+                 "--out", str(tmp_path / "out2"), "--trust-pickle"])
+    assert marker.exists()
+    monkeypatch.delenv("ABB_GYM_TRUST_PICKLE", raising=False)
 
 
 # --------------------------------------------------------------------------- finding 2
