@@ -26,20 +26,14 @@ addition.  The rotor may turn backwards; ``|w| > overspeed * w_op`` trips the dr
 
 Default ``episode_length = 2.5 w_op / drive_max_acceleration + settle_time`` (7.5 s + 1 s on
 ``yoshida_odd``).
-
-## How a policy must start to learn
-
-Action 0 holds the rotor at rest.  A policy whose actions start around 0 (SB3's
-``MlpPolicy``) never meets the operating speed and learns to stay there: plain PPO at the
-registered defaults scored -198.3 with 0 of 16 machines at speed after 100 000 steps, at a
-0.01 s and at a 0.05 s control interval alike (:mod:`abb_gym.envs.learning`).  Start the
-policy on a run-up: :class:`abb_gym.rl.networks.BoundedMlpPolicy` with ``action_mean_init``
-0.5 (0.3 for the torque), as every shipped config does.  ``gym.make`` warns once.
 """
 from __future__ import annotations
 
 from .base import COMMON_DOC, BalancerEnv
+from .learning import START_TO_LEARN_DOC
 from .tasks import RUN_UP_TORQUE
+
+__doc__ += START_TO_LEARN_DOC
 
 __all__ = ["RunUpTorqueEnv"]
 
