@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from .physics import (MotorDrive, Scene, SceneError, SimulationError, SpeedProfile,
                           Trajectory, list_scenes, load_scene, simulate)
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["MotorDrive", "Scene", "SceneError", "SimulationError", "SpeedProfile", "Trajectory",
            "list_scenes", "load_scene", "simulate", "envs", "__version__"]
 

@@ -101,7 +101,7 @@ class Executor:
         ``{"num_gpus": 1}``; default one CPU per task.
     runtime_env : dict or None
         Ray runtime environment used when this executor connects, e.g.
-        ``{"pip": ["abb-gym[cluster]==0.1.0"]}`` or ``{"working_dir": "."}`` for a cluster
+        ``{"pip": ["abb-gym[cluster]==0.2.0"]}`` or ``{"working_dir": "."}`` for a cluster
         whose nodes do not have abb-gym installed.
     start_method : str or None
         How local workers start (``multiprocessing`` start method): default ``"forkserver"``

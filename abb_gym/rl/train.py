@@ -306,7 +306,7 @@ def _versions() -> dict[str, str]:
     import stable_baselines3
     import torch
     import abb_gym
-    return {"abb_gym": getattr(abb_gym, "__version__", "0.1.0"),
+    return {"abb_gym": abb_gym.__version__,
             "stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
             "gymnasium": gymnasium.__version__, "numpy": np.__version__,
             "python": platform.python_version()}
