@@ -45,6 +45,12 @@ def test_a_policy_closing_three_quarters_meets_the_goal_and_one_closing_a_quarte
     assert not weak["goal_met"] and not weak["met"]["gap"] and not weak["met"]["rules"]
     assert weak["met"]["feedback"]  # still better than its replay
     assert "goal met: yes" in goal_lines(good) and "goal met: no" in goal_lines(weak)
+    # the strongest open loop: a replay better than knots moves the share down
+    s = _set(1.5)
+    s["replay:ppo:x"] = _result("replay:ppo:x", [e["return"] + 1.0 for e in
+                                                 s["replay:ppo:x"].episodes])
+    best = goal_check(s, "ppo:x")["gap_closed_best_open_loop"]
+    assert best["open_loop"] == "replay:ppo:x" and best["mean"] == pytest.approx(0.5, abs=0.05)
 
 
 def test_missing_evaluations_are_named():
