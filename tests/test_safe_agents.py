@@ -23,6 +23,7 @@ import json
 import pickle
 import os
 import shutil
+import re
 import subprocess
 import sys
 import zipfile
@@ -403,3 +404,24 @@ def test_a_plain_sb3_model_needs_trust_and_its_environment(tmp_path, capsys, mon
                                         "control_interval": 0.05})
     converted.reset(env, np.ones(1, bool))  # its recorded layout is the environment's
     env.close()
+
+
+def _conversion_table() -> dict[str, float]:
+    """docs/agent-files.md's table: each shipped agent's return before conversion (the
+    pickled original, 16 episodes, seed 0, its own test preset, residual weight 2)."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "agent-files.md").read_text()
+    rows = re.findall(r"^\| (\w+) \| (-?\d+\.\d{6}) \| (-?\d+\.\d{6}) \|$", text, re.M)
+    assert len(rows) >= 6, rows
+    return {name: float(before) for name, before, _ in rows}
+
+
+@pytest.mark.parametrize("name", sorted(_conversion_table()))
+def test_converted_agents_score_as_their_pickled_originals_to_the_digit(name):
+    """The safe files score what the pickles did, to the table's six decimals."""
+    from abb_gym.evaluation.evaluate import evaluate
+    from abb_gym.rl.comparison import agent_setting
+    setting = agent_setting(name)
+    result = evaluate(setting.env_id, setting.scene, f"ppo:{name}", 16, 0, setting.preset,
+                      reward={"residual": 2.0})
+    mean = float(np.mean([e["return"] for e in result.episodes]))
+    assert round(mean, 6) == pytest.approx(_conversion_table()[name], abs=1.5e-6)
