@@ -9,6 +9,7 @@ compile), so it runs with ``--runwheel`` (``make test`` and CI pass it).
 from __future__ import annotations
 
 import json
+import re
 import os
 import subprocess
 import sys
@@ -157,11 +158,18 @@ def test_wheel_installed_outside_the_checkout(tmp_path):
     assert made["preset_baselines"]
     _run([str(venv / "bin" / "abb-gym"), "evaluate", "--env", "abb_gym/RunUpSpeed-v0",
           "--scene", "yoshida_odd", "--policy", "ppo:runup_speed_yoshida_odd",
-          "--policy", "baseline:speed_dwell", "--episodes", "2", "--workers", "1",
+          "--policy", "baseline:speed_dwell", "--episodes", "16", "--seed", "0",
+          "--env-kwargs", "reward={residual: 2.0}", "--workers", "1",
           "--out", str(work / "eval")], cwd=work, env=env)
     data = json.loads((work / "eval" / "evaluation.json").read_text())
     names = [p["policy"] for p in data["policies"]]
     assert names[0] == "ppo:runup_speed_yoshida_odd", names
+    # the installed agent scores as its pickled original did, to the digit (docs/agent-files.md)
+    table = (REPO / "docs" / "agent-files.md").read_text()
+    before = float(re.search(r"^\| runup_speed_yoshida_odd \| (-?\d+\.\d{6}) \|", table,
+                             re.M).group(1))
+    returns = [e["return"] for e in data["policies"][0]["episodes"]]
+    assert round(sum(returns) / len(returns), 6) == pytest.approx(before, abs=1.5e-6)
     tuned = yaml.safe_load((REPO / "configs" / "baselines" / "yoshida_odd.yaml").read_text())
     want = tuned["families"]["speed_dwell"]["params"]
     assert "(tuned)" in names[1], names
