@@ -323,8 +323,8 @@ def settled_residuals(scene: Scene, cases, timing: Timing = Timing(), executor=N
 
 def _map(fn, tasks, executor, desc):
     if executor is None:
-        from tqdm import tqdm
-        return [fn(t) for t in tqdm(tasks, desc=desc)]
+        from ..progress import ProgressBar
+        return [fn(t) for t in ProgressBar(tasks, desc=desc)]
     return executor.map(fn, tasks, desc=desc)
 
 
