@@ -455,22 +455,16 @@ class TrainConfig:
 
     def abb_gym_settings(self) -> dict[str, Any]:
         """The ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know."""
-        out = {"eval_env_kwargs": copy.deepcopy(self.eval_env_kwargs),
-               "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
-               "eval_seed": self.eval_seed, "checkpoint_freq": self.checkpoint_freq,
-               "bootstrap_truncated": self.bootstrap_truncated}
-        if self.tensorboard_log is not None:
-            out["tensorboard_log"] = self.tensorboard_log
-        if self.shaping is not None:
-            out["shaping"] = copy.deepcopy(self.shaping)
-        if self.curriculum is not None:
-            out["curriculum"] = copy.deepcopy(self.curriculum)
-        if self.init_from is not None:
-            out["init_from"] = copy.deepcopy(self.init_from)
-        if self.imitate is not None:
-            out["imitate"] = copy.deepcopy(self.imitate)
-        if self.algo != algorithm_of(self.policy):
-            out["algo"] = self.algo
+        # every key of the section, so that none can be dropped from a run's config.yml or
+        # by an override (the optional ones when set; algo when it is not the policy's)
+        out: dict[str, Any] = {}
+        for key in ABB_GYM_KEYS:
+            value = getattr(self, key)
+            if key == "algo":
+                if value != algorithm_of(self.policy):
+                    out[key] = value
+            elif key not in SECTION_ONLY_KEYS or value is not None:
+                out[key] = copy.deepcopy(value)
         return out
 
     def to_file_data(self) -> dict[str, Any]:
