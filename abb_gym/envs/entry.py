@@ -9,27 +9,21 @@ demand: ``make_<Name>`` and ``make_<Name>_vector``.
 """
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 import gymnasium as gym
 
 from .display import SINGLE_METADATA
 from .learning import advise
-from .tasks import TASKS, Task, get
+from .tasks import TASKS, Task, get, load_named
 
 __all__ = ["env_class", "vector_class", "make_single", "make_vector"]
-
-
-def _load(path: str) -> Any:
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def env_class(task: Task) -> type:
     """The single environment class of ``task``."""
     if task.single_class is not None:
-        return _load(task.single_class)
+        return load_named(task.single_class)
     from .base import BalancerEnv
     return BalancerEnv
 
@@ -37,7 +31,7 @@ def env_class(task: Task) -> type:
 def vector_class(task: Task) -> type:
     """The native vector environment class of ``task``."""
     if task.vector_class is not None:
-        return _load(task.vector_class)
+        return load_named(task.vector_class)
     from .vector import BalancerVectorEnv
     return BalancerVectorEnv
 

@@ -20,7 +20,7 @@ from typing import Any, Mapping
 import gymnasium as gym
 
 
-__all__ = ["Task", "TASKS", "register", "get", "task_ids", "DEFAULT_ENV_ID"]
+__all__ = ["Task", "TASKS", "register", "get", "load_named", "task_ids", "DEFAULT_ENV_ID"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,13 @@ def register(task: Task) -> Task:
                      vector_entry_point=f"{ENTRY}:make_{task.name}_vector",
                      max_episode_steps=task.registered_steps)
     return task
+
+
+def load_named(path: str) -> Any:
+    """The object a task row names by ``"module:name"`` (its classes, its floor)."""
+    import importlib
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def get(env_id: Any) -> Task:

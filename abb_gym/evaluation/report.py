@@ -130,16 +130,13 @@ def residual_floor(result: EvaluationResult) -> dict | None:
     """The task's open-loop floor on ``result``'s episodes (:attr:`abb_gym.envs.tasks.Task.
     residual_floor`), mean and 95 % interval in the task's unit, with its definition; None
     when the task has none."""
-    import importlib
-
     from ..envs import tasks
     from .statistics import mean_interval
 
     path = tasks.get(result.env_id).residual_floor
     if path is None or not result.episodes:
         return None
-    module, name = path.split(":")
-    fn = getattr(importlib.import_module(module), name)
+    fn = tasks.load_named(path)
     values = fn(result.env_id, result.scene, result.preset,
                 [e["seed"] for e in result.episodes])
     return {**mean_interval(values, nonnegative=True),
