@@ -93,13 +93,13 @@ def open_loop_floor(env_id: str, scene: Any, preset: str, seeds, env_kwargs=None
     from ..physics import rotor
 
     seeds = [int(s) for s in seeds]
+    if not seeds:
+        return np.zeros(0)
     kwargs = dict(env_kwargs or {})
     kwargs.update(scene=scene, preset=preset)
-    env = gym.make_vec(env_id, num_envs=max(len(seeds), 1),
-                       vectorization_mode="vector_entry_point", **kwargs)
+    env = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point",
+                       **kwargs)
     try:
-        if not seeds:
-            return np.zeros(0)
         env.reset(seed=seeds)
         setup = env.unwrapped.setup
         loads = env.unwrapped.imbalances
