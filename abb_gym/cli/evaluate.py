@@ -32,16 +32,11 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default=tasks.DEFAULT_ENV_ID,
                    help=f"environment id (one of {', '.join(tasks.TASKS)})")
-    p.add_argument("--scene", default=None,
-                   help="scene name (default: the environment's, yoshida_odd; washer for "
-                        "SpinRedistribute)")
+    add_test_set_arguments(p, "environment preset of the test set")
     p.add_argument("--policy", action="append", required=True,
                    help="baseline:NAME, ppo:NAME|PATH or replay:SPEC (repeatable)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per policy")
     p.add_argument("--seed", type=int, default=0, help="seed of the test set (episode k: seed + k)")
-    p.add_argument("--preset", default=None,
-                   help="environment preset of the test set (default: the environment's held-out preset, test; "
-                        "laundry_test for SpinRedistribute)")
     p.add_argument("--sweep", type=int, default=0, metavar="N",
                    help="also sweep every baseline family over N parameter sets for the "
                         "Pareto chart (RunUpSpeed)")
@@ -55,6 +50,25 @@ def register(sub) -> None:
     add_trust_argument(p)
     add_executor_arguments(p)
     p.set_defaults(func=run)
+
+
+def add_test_set_arguments(parser, preset_help: str) -> None:
+    """``--scene`` and ``--preset``, by default the environment's
+    (:func:`apply_test_set_defaults`)."""
+    parser.add_argument("--scene", default=None,
+                        help="scene name (default: the environment's, yoshida_odd; washer for "
+                             "SpinRedistribute)")
+    parser.add_argument("--preset", default=None,
+                        help=f"{preset_help} (default: the environment's held-out preset, "
+                             f"test; laundry_test for SpinRedistribute)")
+
+
+def apply_test_set_defaults(args) -> None:
+    """Fill ``args.scene`` and ``args.preset`` left out with the task's default scene and
+    held-out preset (``args.env`` names the task)."""
+    task = tasks.get(args.env)
+    args.scene = args.scene or task.default_scene
+    args.preset = args.preset or task.test_preset
 
 
 def add_trust_argument(parser) -> None:
@@ -93,9 +107,7 @@ def _executor(args):
 
 
 def run(args) -> int:
-    task = tasks.get(args.env)
-    args.scene = args.scene or task.default_scene
-    args.preset = args.preset or task.test_preset
+    apply_test_set_defaults(args)
     from ..evaluation.evaluate import MAX_EPISODES, check_inputs, evaluate
     from ..evaluation.report import reward_line, summary_table, write_report
     from .outputs import output_folder

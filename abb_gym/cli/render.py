@@ -26,12 +26,8 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default=tasks.DEFAULT_ENV_ID,
                    help=f"environment id (one of {', '.join(tasks.TASKS)})")
-    p.add_argument("--scene", default=None,
-                   help="scene name (default: the environment's, yoshida_odd; washer for "
-                        "SpinRedistribute)")
-    p.add_argument("--preset", default=None,
-                   help="environment preset (default: the environment's held-out preset, test; "
-                        "laundry_test for SpinRedistribute)")
+    from .evaluate import add_test_set_arguments, add_trust_argument
+    add_test_set_arguments(p, "environment preset")
     p.add_argument("--policy", required=True, help="baseline:NAME, ppo:NAME|PATH or replay:SPEC")
     p.add_argument("--episode", type=int, default=0,
                    help="test episode K (the environment reset with seed + K)")
@@ -44,7 +40,6 @@ def register(sub) -> None:
                    help="one frame per N control steps (default: real time at --fps)")
     p.add_argument("--steps", type=int, default=None, metavar="N",
                    help="stop the episode after N control steps (default: the whole episode)")
-    from .evaluate import add_trust_argument
     add_trust_argument(p)
     p.set_defaults(func=run)
 
@@ -55,9 +50,8 @@ def default_out(scene: str, policy: str, episode: int) -> str:
 
 
 def run(args) -> int:
-    task = tasks.get(args.env)
-    args.scene = args.scene or task.default_scene
-    args.preset = args.preset or task.test_preset
+    from .evaluate import apply_test_set_defaults
+    apply_test_set_defaults(args)
     from ..evaluation.video import check_video, render_episode
     from .outputs import output_file
     if args.out is not None and not args.out.strip():  # not read as "the default path"
@@ -66,8 +60,9 @@ def run(args) -> int:
                                                             args.episode)
     check_video(out, args.fps)  # suffix, fps and the extra before any folder is made
     output_file(out, "--out")
-    if tasks.get(args.env).one_step:
-        print(f"abb-gym render: note: a {tasks.get(args.env).name} episode is one step (its "
+    task = tasks.get(args.env)
+    if task.one_step:
+        print(f"abb-gym render: note: a {task.name} episode is one step (its "
               f"whole run-up): the video has two frames, before and after", file=sys.stderr)
     res = render_episode(args.env, args.scene, args.policy, out, episode=args.episode,
                          seed=args.seed, preset=args.preset, fps=args.fps, every=args.every,
