@@ -1,8 +1,7 @@
 """The entry points of the registered ids: ``gym.make`` and ``gym.make_vec`` call these.
 
-:mod:`abb_gym.envs.tasks` declares each task; this module builds its environments: the
-task's own classes where it names them, else the generic :class:`~abb_gym.envs.base.
-BalancerEnv` and :class:`~abb_gym.envs.vector.BalancerVectorEnv` bound to the task.
+:mod:`abb_gym.envs.tasks` declares each task; this module builds its environments from the
+classes the task names (:func:`~abb_gym.envs.tasks.load_named`).
 ``gym.register`` takes entry points as ``"module:attribute"`` text (an id's spec stays
 JSON-serialisable and picklable), so each registered task has two attributes here, made on
 demand: ``make_<Name>`` and ``make_<Name>_vector``.
@@ -15,48 +14,30 @@ import gymnasium as gym
 
 from .display import SINGLE_METADATA
 from .learning import advise
-from .tasks import TASKS, Task, get, load_named
+from .tasks import TASKS, get, load_named
 
-__all__ = ["env_class", "vector_class", "make_single", "make_vector"]
-
-
-def env_class(task: Task) -> type:
-    """The single environment class of ``task``."""
-    if task.single_class is not None:
-        return load_named(task.single_class)
-    from .base import BalancerEnv
-    return BalancerEnv
+__all__ = ["make_single", "make_vector"]
 
 
-def vector_class(task: Task) -> type:
-    """The native vector environment class of ``task``."""
-    if task.vector_class is not None:
-        return load_named(task.vector_class)
-    from .vector import BalancerVectorEnv
-    return BalancerVectorEnv
-
-
-def _own_limit(env: Any) -> gym.Env:
-    """``env`` inside a ``TimeLimit`` of its own episode length [control intervals]."""
+def make_single(env_id: str, **kwargs: Any) -> gym.Env:
+    """The single environment of ``env_id`` made with ``kwargs``: inside a ``TimeLimit`` of
+    its own episode length [control intervals] unless the task registers a
+    ``max_episode_steps`` (:mod:`abb_gym.envs`)."""
+    task = get(env_id)
+    env = load_named(task.single_class)(task=env_id, **kwargs)
+    advise(task)
+    if task.registered_steps is not None:
+        return env
     setup = env.setup
     steps = setup.max_steps if setup.backstop <= 0 else min(setup.max_steps, setup.backstop)
     return gym.wrappers.TimeLimit(env, max_episode_steps=int(steps))
 
 
-def make_single(env_id: str, **kwargs: Any) -> gym.Env:
-    """The single environment of ``env_id`` made with ``kwargs``: inside a ``TimeLimit`` of
-    its own episode length unless the task registers a ``max_episode_steps``
-    (:mod:`abb_gym.envs`)."""
-    task = get(env_id)
-    env = env_class(task)(task=env_id, **kwargs)
-    advise(task)
-    return env if task.registered_steps is not None else _own_limit(env)
-
-
 def make_vector(env_id: str, **kwargs: Any):
     """The native vector environment of ``env_id`` made with ``kwargs``."""
-    env = vector_class(get(env_id))(task=env_id, **kwargs)
-    advise(get(env_id))
+    task = get(env_id)
+    env = load_named(task.vector_class)(task=env_id, **kwargs)
+    advise(task)
     return env
 
 

@@ -28,9 +28,10 @@ class Task:
     """One environment id (module docstring).
 
     ``action``: the action model's name (:data:`abb_gym.envs.actions.ACTION_MODELS`).
-    ``single_class``/``vector_class``: ``"module:Class"`` of the environments (None: the
+    ``single_class``/``vector_class``: ``"module:Class"`` of the environments (default: the
     generic :class:`~abb_gym.envs.base.BalancerEnv` / :class:`~abb_gym.envs.vector.
-    BalancerVectorEnv` bound to this task).  ``settings``: preset fields the task fixes
+    BalancerVectorEnv`, bound to this task by its id; named as text, so that this module
+    imports no environment and :func:`load_named` is the one way to a task's class).  ``settings``: preset fields the task fixes
     (merged over the preset and the keyword overrides).  ``registered_steps``: the registered
     ``max_episode_steps`` (None: ``gym.make`` wraps the environment in a ``TimeLimit`` of its
     own episode length, which depends on the scene and preset).  ``open_loop``: the open-loop
@@ -45,8 +46,8 @@ class Task:
     env_id: str
     action: str
     summary: str
-    single_class: str | None = None
-    vector_class: str | None = None
+    single_class: str = "abb_gym.envs.base:BalancerEnv"
+    vector_class: str = "abb_gym.envs.vector:BalancerVectorEnv"
     default_scene: str = "yoshida_odd"
     default_preset: str = "train"
     settings: Mapping[str, Any] = field(default_factory=dict)

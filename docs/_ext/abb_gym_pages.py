@@ -59,8 +59,8 @@ def tasks() -> list[Task]:
     preset, registered steps), in registration order."""
     import importlib
 
-    from abb_gym.envs import entry, tasks as registry
-    return [Task(row, importlib.import_module(entry.env_class(row).__module__))
+    from abb_gym.envs import tasks as registry
+    return [Task(row, importlib.import_module(registry.load_named(row.single_class).__module__))
             for row in registry.TASKS.values()]
 
 
@@ -183,7 +183,7 @@ def env_page(task: Task) -> str:
     """The page of one environment id (MyST Markdown)."""
     from abb_gym.envs.base import COMMON_DOC
     from abb_gym.envs.setup import EnvSetup
-    from abb_gym.envs.entry import env_class, vector_class
+    from abb_gym.envs.tasks import load_named
     row = task.row
     scene, preset = row.default_scene, row.default_preset
     lead, own = sections(task.module.__doc__)
@@ -194,7 +194,7 @@ def env_page(task: Task) -> str:
     limit = ("its own episode length (`gym.make` wraps a `TimeLimit` of exactly that many "
              "steps)" if row.registered_steps is None else
              f"{row.registered_steps} (a backstop; episodes are one step)")
-    single, vector = env_class(row), vector_class(row)
+    single, vector = load_named(row.single_class), load_named(row.vector_class)
     facts = md_table(["", ""], [
         ["Action space", f"`{setup.action_space}`"],
         ["Observation space", f"`Box({setup.obs_dim},)` float32 on `{scene}` / `{preset}` "
