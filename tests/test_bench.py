@@ -1,5 +1,9 @@
 """Smoke test of the work-precision benchmark (the real run is ``abb-gym bench accuracy``)."""
+import os
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from abb_gym import SpeedProfile
 from abb_gym.benchmarks.accuracy import (BATCH_RUNS, Case, plot_work_precision,
@@ -163,3 +167,17 @@ def test_bench_speed_costs_only_runs_the_side_by_side_tables_alone(tmp_path, mon
     rows = (tmp_path / "speed.md").read_text().splitlines()
     assert len(rows) == 3 and rows[2].startswith("| washer ")
     assert "## Washer against yoshida_odd" in (tmp_path / "performance.md").read_text()
+
+
+def test_the_busy_neighbour_runs_during_the_block_and_is_gone_after():
+    """The batch table's busy case really has a second process on a CPU, and leaves none
+    behind (also when the block raises)."""
+    from abb_gym.benchmarks import env_cost
+    with pytest.raises(RuntimeError):
+        with env_cost.busy_neighbour() as proc:
+            assert proc.poll() is None
+            stat = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            user_s = int(stat[11]) / os.sysconf("SC_CLK_TCK")  # utime, field 14
+            assert user_s > 0.05  # it spins (up to 1 s by now; less on a loaded machine)
+            raise RuntimeError("the block fails")
+    assert proc.poll() is not None
