@@ -126,7 +126,10 @@ def _cell(stat: dict, digits: int = 3) -> str:
 
 
 def agent_table(results: Sequence[EvaluationResult]) -> str:
-    """One row per policy: environment, at-speed share, settled run-up time, residual."""
+    """One row per policy: environment, at-speed share, settled run-up time, residual, and
+    the balancing metrics of a hold at the operating speed after the run (time to balance,
+    residual after the hold: :mod:`abb_gym.evaluation.metrics`), which separate unfinished
+    settling from a residual that control left."""
     rows = []
     for r in results:
         s = r.summary()
@@ -134,6 +137,8 @@ def agent_table(results: Sequence[EvaluationResult]) -> str:
                      "at speed": _cell(s["at_speed"], 2),
                      "settled run-up [s]": _cell(s["run_up_time"]),
                      "residual [W_r/e]": _cell(s["residual_vibration"]),
+                     "time to balance [s]": _cell(s["time_to_balance"]),
+                     "residual after hold [W_r/e]": _cell(s["residual_after_hold"]),
                      "peak speed [w_op]": _cell(s["peak_speed"]),
                      "return": _cell(s["return"])})
     return markdown_table(rows)
