@@ -128,7 +128,7 @@ class TargetSpeedAction(ActionModel):
     name = "test_target_speed"
     kind_id = KIND_ROWS
 
-    def before_step(self, setup, bufs, i, action, imbalance_phase):
+    def before_step(self, setup, bufs, i, action, phase):
         nq = bufs.s.shape[1] // 2
         w = float(bufs.s[i, nq + 2])
         th = float(bufs.s[i, 2])

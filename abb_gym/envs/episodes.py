@@ -26,7 +26,7 @@ redistribution of the laundry, the imbalances of the redistributions to come
   whose Scene is built only when asked for (building and validating a Scene costs ~0.3 ms, the
   reset of a row without it a few microseconds).
 
-**Angles** (``imbalance_phase``, ``ball_angles``, given or drawn) are reduced to [-pi, pi] with
+**Angles** (the parameters declared ``angle``, given or drawn) are reduced to [-pi, pi] with
 the exact IEEE remainder: an angle and the same angle plus any multiple of 2 pi (as floats:
 ``1e16`` and ``np.mod(1e16, 2 pi)``) give the same machine bit for bit, and the compiled
 sin/cos, accurate to ``|x| <= 1.6e6`` rad (:mod:`abb_gym.physics.elementary`), never see a
@@ -101,12 +101,12 @@ def _machine(values: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class Episode:
-    """Parameters of one episode: every episode parameter by its name
-    (:mod:`abb_gym.envs.episode_parameters`: ``imbalance`` [kg m], ``imbalance_phase`` [rad],
-    ``ball_angles`` [rad], ...), the integration step bound ``integration_step`` [s], the
-    rotor's rest position ``static_deflection`` (x, y) [m], the key of the sensor noise
-    ``noise_key`` and, with redistribution, the imbalances of the redistributions to come
-    ``redistributions`` ((count, 2): imbalance [kg m], phase [rad])."""
+    """Parameters of one episode: every episode parameter by its name, in its unit
+    (:data:`~abb_gym.envs.episode_parameters.PARAMETERS`), the integration step bound
+    ``integration_step`` [s], the rotor's rest position ``static_deflection`` (x, y) [m], the
+    key of the sensor noise ``noise_key`` and, with redistribution, the imbalances of the
+    redistributions to come ``redistributions`` ((count, 2): imbalance [kg m], phase
+    [rad])."""
 
     def __init__(self, nominal: Scene, values: Mapping[str, Any], integration_step: float,
                  static_deflection: tuple[float, float] = (0.0, 0.0), noise_key: int = 0,
