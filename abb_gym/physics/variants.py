@@ -109,7 +109,9 @@ def _values(scene: Scene, values: dict[str, Any], n: int | None = None) -> _Valu
             return float(CHANGES[name].nominal(scene) if given is None else given)
         if given is None:
             return np.full(n, float(CHANGES[name].nominal(scene)))
-        return np.broadcast_to(np.asarray(given, float), (n,))
+        column = np.asarray(given, float)
+        # (read only here; np.broadcast_to costs microseconds per reset and column)
+        return column if column.shape == (n,) else np.broadcast_to(column, (n,))
 
     return _Values(value("imbalance"), value("ball_drag_scale"), value("rolling_resistance_scale"),
                    value("critical_speed_scale"), value("support_damping_scale"),
