@@ -136,17 +136,17 @@ class ActionModel:
     def check(self, setup: Any) -> None:
         """Raise PresetError if the preset does not suit this action type."""
 
-    def reset_rows(self, d: np.ndarray, imbalance_phase: np.ndarray, setup: Any) -> None:
+    def reset_rows(self, d: np.ndarray, phase: np.ndarray, setup: Any) -> None:
         """Drive rows ``d`` (environments x rows x N_DRIVE, zeroed) at the start of episodes
-        with rotor angles ``imbalance_phase`` [rad] (rotor at rest)."""
+        with rotor angles ``phase`` [rad] (each episode's imbalance phase; rotor at rest)."""
         d[..., dl.D_MODE] = self.mode
         if self.mode == dl.MODE_PRESCRIBED:
-            d[..., dl.D_TH0] = np.asarray(imbalance_phase)[:, None]
+            d[..., dl.D_TH0] = np.asarray(phase)[:, None]
         else:
             d[..., dl.D_TLIM] = setup.torque_limit
 
     def before_step(self, setup: Any, bufs: Any, i: int, action: np.ndarray,
-                    imbalance_phase: float) -> dict[str, Any] | None:
+                    phase: float) -> dict[str, Any] | None:
         """Python-side work before the compiled step of row ``i`` (clipped ``action``, the
         episode's imbalance phase [rad]); returns extra info for that row, or None."""
         return None
@@ -213,8 +213,8 @@ class DwellAction(ActionModel):
                               f"({dw.speed_range[0]:g} x the critical speed {wc:.4g} rad/s > "
                               f"{setup.operating_speed:.4g} rad/s)")
 
-    def before_step(self, setup, bufs, i, action, imbalance_phase):
-        profile, params = dwell_profile(setup, action, imbalance_phase)
+    def before_step(self, setup, bufs, i, action, phase):
+        profile, params = dwell_profile(setup, action, phase)
         _, rows = profile.segment_table(setup.episode_length + setup.control_interval)
         d = bufs.d[i]
         d[:] = 0.0

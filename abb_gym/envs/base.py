@@ -54,7 +54,7 @@ COMMON_DOC = textwrap.dedent(r"""
     of standard deviation ``noise * A_v`` per component gives ``sync_amplitude = |Z| / A_v``
     and ``(sync_cos, sync_sin) = Z / |Z|`` ((0, 0) while ``Z = 0``, at rest without noise).
     The mark is where the rotor's x axis pointed at t = 0, so the primary imbalance lies at
-    ``imbalance_phase`` from it (unobserved, random per episode).  At constant speed with the
+    the imbalance phase from it (unobserved, random per episode).  At constant speed with the
     balls still, ``|Z|`` is the steady whirl radius and ``arg Z`` the direction of the residual
     imbalance from the mark minus the support's phase lag (about 0 below the critical speed,
     180 deg above): where the balls stand.  ``frame_stack: k`` returns the last k
@@ -114,8 +114,8 @@ COMMON_DOC = textwrap.dedent(r"""
 
     {episode_table}
 
-    The critical speed changes through the supported mass (``critical_speed_scale`` s:
-    M / s^2, :mod:`abb_gym.envs.config`).  With redistribution of the laundry
+    The critical speed changes through the supported mass (a load:
+    :mod:`abb_gym.envs.config`).  With redistribution of the laundry
     (:mod:`abb_gym.envs.redistribution`) the episode also draws its redistributions, and the
     reset option ``redistributions`` fixes them.
     Under gravity the rest position is the episode's own sag.
@@ -198,8 +198,8 @@ COMMON_DOC = textwrap.dedent(r"""
 
     ``reset`` checks everything (seed: None or an int >= 0; every option) before it changes
     anything: a rejected reset raises ``ValueError`` naming the field and leaves the
-    environment, its random generator included, as it was.  Angles (``imbalance_phase``,
-    ``ball_angles``) are reduced to [-pi, pi]: ``1e16`` gives the machine of
+    environment, its random generator included, as it was.  Angles (the imbalance phase and
+    the ball angles) are reduced to [-pi, pi]: ``1e16`` gives the machine of
     ``math.remainder(1e16, 2 pi)``.  Under RK4, an episode whose ball drag or rolling
     resistance would force a step more than 100 x shorter than its rotation needs
     (``ball_drag_scale=1e6``: millions of steps per control interval) is refused with a

@@ -12,8 +12,9 @@ declared once here, as an :class:`EpisodeParameter`; from that declaration come
   given here;
 * the column of the episode table, the key of the reset ``info`` and the attribute of
   :class:`~abb_gym.envs.episodes.Episode`;
-* the machine change it makes (:mod:`abb_gym.physics.variants`: its name in
-  :data:`~abb_gym.physics.variants.CHANGES`), or its place in the initial state;
+* the machine change it makes (:mod:`abb_gym.physics.variants`: the change of the same name in
+  :data:`~abb_gym.physics.variants.CHANGES`, which also gives its nominal value), or its place
+  in the initial state;
 * the corners of the preset's ranges that are checked when an environment is made (the
   stiffness of its RK4 steps, a machine that exists);
 * the table in the environments' documentation (:func:`doc_table`).
@@ -29,6 +30,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
+
+from ..physics import variants
 
 __all__ = ["EpisodeParameter", "OptionUnit", "PARAMETERS", "BY_NAME", "RESET_OPTIONS",
            "doc_table", "randomize_fields"]
@@ -51,16 +54,20 @@ class OptionUnit:
 class EpisodeParameter:
     """One episode parameter (module docstring).
 
-    ``name``: table column, info key (``info_key`` where it differs), reset option.
-    ``randomize``: the preset's ``randomize`` field (range of the drawn number) and
-    ``range_spec`` its declaration (:func:`abb_gym.configuration.declare` keywords);
+    ``name``: table column, info key (``info_key`` where it differs), reset option and, for a
+    ``machine`` parameter, the machine change of that name.
+    ``randomize``: the preset's ``randomize`` field (range of the drawn number; default the
+    parameter's name) and ``range_spec`` its declaration
+    (:func:`abb_gym.configuration.declare` keywords);
     ``from_drawn(scene, u)`` maps a drawn number onto the parameter (default: itself).
-    ``nominal(scene)``: the value when the preset does not randomise it.
+    ``nominal(scene)``: the value when the preset does not randomise it (default, for a
+    ``machine`` parameter, the machine change's nominal value).
     ``option_lower``/``option_inclusive``: the reset option's bound (None: any finite number);
     ``option_units``: alternative options, mutually exclusive with the main one.
     ``per_ball``: one value per ball.  ``angle``: reduced to [-pi, pi].
-    ``machine``: the machine change it makes (:data:`abb_gym.physics.variants.CHANGES`), None
-    for a parameter of the initial state (phase, ball angles).
+    ``machine``: it is the machine change of the same name
+    (:data:`abb_gym.physics.variants.CHANGES`); False for a parameter of the initial state
+    (phase, ball angles).
     ``step_corner``: the RK4 step depends on it (the preset's corners are checked);
     ``machine_check``: a value may not be a machine (checked at its corners and as an option).
     ``per_event``: drawn again at each redistribution of the laundry.  ``factor``: a factor on
@@ -71,22 +78,36 @@ class EpisodeParameter:
     name: str
     unit: str
     doc: str
-    nominal: Callable[[Any], Any]
-    randomize: str
     range_spec: dict
+    nominal: Callable[[Any], Any] | None = None
+    randomize: str = ""
     from_drawn: Callable[[Any, Any], Any] | None = None
     option_lower: float | None = 0.0
     option_inclusive: bool = True
     option_units: tuple[OptionUnit, ...] = ()
     per_ball: bool = False
     angle: bool = False
-    machine: str | None = None
+    machine: bool = False
     step_corner: bool = False
     machine_check: bool = False
     per_event: bool = False
     factor: bool = False
     info_key: str = ""
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        # frozen: the defaults that come from the name and the machine change are set here
+        if not self.randomize:
+            object.__setattr__(self, "randomize", self.name)
+        if self.machine and self.name not in variants.CHANGES:
+            raise ValueError(f"episode parameter {self.name!r} is declared a machine change, "
+                             f"but abb_gym.physics.variants.CHANGES has none of that name "
+                             f"(it has {list(variants.CHANGES)})")
+        if self.nominal is None:
+            if not self.machine:
+                raise ValueError(f"episode parameter {self.name!r}: give its nominal value "
+                                 f"(only a machine change has one by default)")
+            object.__setattr__(self, "nominal", variants.CHANGES[self.name].nominal)
 
     @property
     def key(self) -> str:
@@ -106,60 +127,54 @@ def _capacity(scene: Any, ratio):
 PARAMETERS: tuple[EpisodeParameter, ...] = (
     EpisodeParameter(
         "imbalance", "kg m", "primary imbalance U0 (the load's), drawn as a ratio of the "
-        "balancing capacity sum m_i R", nominal=lambda sc: float(sc.imbalance),
-        randomize="imbalance_ratio",
+        "balancing capacity sum m_i R", randomize="imbalance_ratio",
         range_spec=dict(kind="range", gt=0.0, le=100.0, nullable=True,
                         doc="imbalance / balancing capacity (sum m_i R)"),
         from_drawn=_capacity,
         option_units=(OptionUnit("imbalance_ratio", "-", 0.0, _capacity),),
-        machine="imbalance", per_event=True),
+        machine=True, per_event=True),
     EpisodeParameter(
         "imbalance_phase", "rad", "angle of the imbalance at t = 0 (fixed frame) and from the "
-        "rotor's reference mark", nominal=lambda sc: 0.0, randomize="imbalance_phase",
+        "rotor's reference mark", nominal=lambda sc: 0.0,
         range_spec=dict(kind="range", unit="rad", ge=-2 * PI, le=2 * PI, nullable=True,
                         doc="angle of the imbalance at t = 0 (fixed frame)"),
         option_lower=None, angle=True, per_event=True),
     EpisodeParameter(
         "ball_angles", "rad", "each ball's initial angle from the imbalance",
-        nominal=lambda sc: np.asarray(sc.ball_angles0, dtype=float), randomize="ball_angles",
+        nominal=lambda sc: np.asarray(sc.ball_angles0, dtype=float),
         range_spec=dict(kind="range", unit="rad", ge=-2 * PI, le=2 * PI, nullable=True,
                         doc="each ball's initial angle from the imbalance"),
         option_lower=None, per_ball=True, angle=True, info_key="initial_ball_angles"),
     EpisodeParameter(
-        "ball_drag_scale", "-", "factor on the scene's race drag", nominal=lambda sc: 1.0,
-        randomize="ball_drag_scale",
+        "ball_drag_scale", "-", "factor on the scene's race drag",
         range_spec=dict(kind="range", gt=0.0, le=1e3, nullable=True,
                         doc="factor on the scene's ball_drag"),
-        option_inclusive=False, machine="ball_drag_scale", step_corner=True, factor=True),
+        option_inclusive=False, machine=True, step_corner=True, factor=True),
     EpisodeParameter(
         "rolling_resistance_scale", "-", "factor on the scene's rolling resistance",
-        nominal=lambda sc: 1.0, randomize="rolling_resistance_scale",
         range_spec=dict(kind="range", ge=0.0, le=1e3, nullable=True,
                         doc="factor on the scene's ball_rolling_resistance"),
-        machine="rolling_resistance_scale", step_corner=True, factor=True),
+        machine=True, step_corner=True, factor=True),
     EpisodeParameter(
         "critical_speed_scale", "-", "factor s on the critical speeds, through the supported "
-        "mass M / s^2 (a load)", nominal=lambda sc: 1.0, randomize="critical_speed_scale",
+        "mass M / s^2 (a load)",
         range_spec=dict(kind="range", gt=0.0, le=10.0, nullable=True,
                         doc="factor s on the critical speeds, through the supported mass "
                             "M / s^2 (a load; module docstring)"),
-        option_inclusive=False, machine="critical_speed_scale", step_corner=True,
-        machine_check=True, factor=True),
+        option_inclusive=False, machine=True, step_corner=True, machine_check=True,
+        factor=True),
     EpisodeParameter(
         "support_damping_scale", "-", "factor on the scene's support damping (both axes)",
-        nominal=lambda sc: 1.0, randomize="support_damping_scale",
         range_spec=dict(kind="range", ge=0.0, le=1e3, nullable=True,
                         doc="factor on the scene's support damping (both axes)"),
-        machine="support_damping_scale", step_corner=True, machine_check=True, factor=True),
+        machine=True, step_corner=True, machine_check=True, factor=True),
     EpisodeParameter(
         "fluid_temperature", "K", "temperature of the balancer fluid (its viscosity; scenes "
         "with a fluid preset that has a temperature law)",
-        nominal=lambda sc: float(sc.fluid_temperature), randomize="fluid_temperature",
         range_spec=dict(kind="range", unit="K", ge=250.0, le=400.0, nullable=True,
                         doc="temperature of the balancer fluid (a wash temperature; scenes "
                             "with an oil of Spannan's Table 6.1)"),
-        option_lower=250.0, machine="fluid_temperature", step_corner=True,
-        machine_check=True),
+        option_lower=250.0, machine=True, step_corner=True, machine_check=True),
 )
 
 BY_NAME: dict[str, EpisodeParameter] = {par.name: par for par in PARAMETERS}

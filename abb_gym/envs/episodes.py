@@ -26,7 +26,7 @@ redistribution of the laundry, the imbalances of the redistributions to come
   whose Scene is built only when asked for (building and validating a Scene costs ~0.3 ms, the
   reset of a row without it a few microseconds).
 
-**Angles** (``imbalance_phase``, ``ball_angles``, given or drawn) are reduced to [-pi, pi] with
+**Angles** (the parameters declared ``angle``, given or drawn) are reduced to [-pi, pi] with
 the exact IEEE remainder: an angle and the same angle plus any multiple of 2 pi (as floats:
 ``1e16`` and ``np.mod(1e16, 2 pi)``) give the same machine bit for bit, and the compiled
 sin/cos, accurate to ``|x| <= 1.6e6`` rad (:mod:`abb_gym.physics.elementary`), never see a
@@ -97,16 +97,16 @@ def reduce_angle(angle):
 
 def _machine(values: Mapping[str, Any]) -> dict[str, Any]:
     """The machine changes (:mod:`abb_gym.physics.variants`) of episode ``values``."""
-    return {par.machine: values[par.name] for par in PARAMETERS if par.machine}
+    return {par.name: values[par.name] for par in PARAMETERS if par.machine}
 
 
 class Episode:
-    """Parameters of one episode: every episode parameter by its name
-    (:mod:`abb_gym.envs.episode_parameters`: ``imbalance`` [kg m], ``imbalance_phase`` [rad],
-    ``ball_angles`` [rad], ...), the integration step bound ``integration_step`` [s], the
-    rotor's rest position ``static_deflection`` (x, y) [m], the key of the sensor noise
-    ``noise_key`` and, with redistribution, the imbalances of the redistributions to come
-    ``redistributions`` ((count, 2): imbalance [kg m], phase [rad])."""
+    """Parameters of one episode: every episode parameter by its name, in its unit
+    (:data:`~abb_gym.envs.episode_parameters.PARAMETERS`), the integration step bound
+    ``integration_step`` [s], the rotor's rest position ``static_deflection`` (x, y) [m], the
+    key of the sensor noise ``noise_key`` and, with redistribution, the imbalances of the
+    redistributions to come ``redistributions`` ((count, 2): imbalance [kg m], phase
+    [rad])."""
 
     def __init__(self, nominal: Scene, values: Mapping[str, Any], integration_step: float,
                  static_deflection: tuple[float, float] = (0.0, 0.0), noise_key: int = 0,
@@ -330,7 +330,7 @@ def _check_machine_option(scene: Scene, where: str, values: Mapping[str, Any],
     changes = {}
     for par in PARAMETERS:
         if par.machine_check:
-            changes[par.machine] = values[par.name]
+            changes[par.name] = values[par.name]
         if par is checked:
             break
     variants.check_machine(scene, where, ValueError, **changes)
@@ -427,13 +427,13 @@ def _stiff_message(setup: Any, values: Mapping[str, Any], k: int, step: float, n
     corners = [par for par in PARAMETERS if par.step_corner]
     # the drag and rolling resistance always; the machine's mass and damping when they vary;
     # any other parameter where it differs from the scene
-    own = [par for par in corners if par.machine not in variants.RATE_CHANGES
+    own = [par for par in corners if par.name not in variants.RATE_CHANGES
            and (not par.machine_check
                 or float(np.asarray(values[par.name])[k]) != par.nominal(sc))]
     machine = " and ".join(shown(par) for par in own)
     if varied:
         machine += ", " + " and ".join(shown(par) for par in corners
-                                       if par.machine in variants.RATE_CHANGES)
+                                       if par.name in variants.RATE_CHANGES)
     return (f"{where}: an episode with {machine} is too stiff for integrator='rk4': its ball "
             f"drag and rolling resistance force a {step:.3g} s step at the top speed "
             f"{setup.max_speed:.4g} rad/s (from operating_speed = {setup.operating_speed:.4g} "
@@ -473,7 +473,7 @@ def check_preset_machines(setup: Any) -> None:
         for corner in _corners(getattr(rz, par.randomize)):
             if corner is not None:
                 variants.check_machine(setup.scene, where % par.randomize, PresetError,
-                                       **{par.machine: par.drawn(setup.scene, corner)})
+                                       **{par.name: par.drawn(setup.scene, corner)})
 
 
 def check_preset_stiffness(setup: Any) -> None:
@@ -504,7 +504,7 @@ def check_preset_stiffness(setup: Any) -> None:
 
 def _machine_of(values: Mapping[str, Any]) -> dict[str, Any]:
     """The machine changes of the (possibly partial) episode ``values``."""
-    return {par.machine: values[par.name] for par in PARAMETERS
+    return {par.name: values[par.name] for par in PARAMETERS
             if par.machine and par.name in values}
 
 

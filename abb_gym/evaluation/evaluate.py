@@ -183,7 +183,7 @@ def _hold(native: Any, j: int, hist: dict, unit: float, hold: float) -> dict[str
     setup = native.setup
     ep = native.episode(j)
     scene = variants.variant_scene(ep.nominal, **{
-        **{par.machine: ep.values[par.name] for par in PARAMETERS if par.machine},
+        **{par.name: ep.values[par.name] for par in PARAMETERS if par.machine},
         "imbalance": float(native.imbalances[j])})
     xs, ys = ep.static_deflection
     tolerance = mt.balance_tolerance(scene, setup.operating_speed, setup.config.balance_tolerance)

@@ -13,23 +13,9 @@ that knows how each change maps onto the scene and onto the packed parameters of
   ``packed_variants(scene, n, **values)[r]`` equals ``pack_parameters(variant_scene(scene,
   **values[r]))`` bit for bit (``tests/test_episodes.py`` holds the two together).
 
-The changes (:data:`CHANGES`; a value equal to the nominal one leaves the scene as it is):
+The changes are declared once, in :data:`CHANGES` (a value equal to the nominal one leaves the
+scene as it is); the list below is generated from them:
 
-========================  =======  ==========================================================
-change                    unit     what it does
-========================  =======  ==========================================================
-imbalance                 kg m     primary imbalance U0, through the rotor eccentricity
-                                   ``U0 / rotor mass``
-ball_drag_scale           -        factor on every ball's race drag
-rolling_resistance_scale  -        factor on every ball's rolling-resistance offset
-critical_speed_scale      -        factor s on the critical speeds ``sqrt(k / M)`` through the
-                                   supported mass ``M / s^2`` (a load: laundry, sample tubes);
-                                   the rotor carries the change, its polar inertia in
-                                   proportion to its mass (a load spread like the rotor)
-support_damping_scale     -        factor on the support damping (both axes)
-fluid_temperature         K        the balancer fluid's temperature (its viscosity and
-                                   density: :func:`abb_gym.physics.fluids.fluid_properties`)
-========================  =======  ==========================================================
 """
 from __future__ import annotations
 
@@ -50,15 +36,48 @@ __all__ = ["CHANGES", "loaded_rotor_mass", "loaded_polar_inertia", "rotor_eccent
 FLUID_COLUMNS = np.array([mdl.B_VM, mdl.B_KLIN, mdl.B_KQUAD, mdl.B_REU, mdl.B_MEFF, mdl.B_CI,
                           mdl.B_II, mdl.B_INV])
 
-#: the changes a variant may make, with their nominal value on a scene
-CHANGES: dict[str, Callable[[Scene], float]] = {
-    "imbalance": lambda scene: scene.imbalance,
-    "ball_drag_scale": lambda scene: 1.0,
-    "rolling_resistance_scale": lambda scene: 1.0,
-    "critical_speed_scale": lambda scene: 1.0,
-    "support_damping_scale": lambda scene: 1.0,
-    "fluid_temperature": lambda scene: scene.fluid_temperature,
+
+class Change(NamedTuple):
+    """One change a variant may make: its unit, its nominal value on a scene, what it does and
+    whether it alters the machine's mass or support damping (``rates``: the rates that bound a
+    fixed step, :func:`machine_rates`, and its reference amplitudes)."""
+
+    unit: str
+    nominal: Callable[[Scene], float]
+    doc: str
+    rates: bool = False
+
+
+def _one(scene: Scene) -> float:
+    return 1.0
+
+
+#: the changes a variant may make, by name (the episode parameters of the same name)
+CHANGES: dict[str, Change] = {
+    "imbalance": Change("kg m", lambda scene: scene.imbalance, "primary imbalance U0, through "
+                        "the rotor eccentricity ``U0 / rotor mass``"),
+    "ball_drag_scale": Change("-", _one, "factor on every ball's race drag"),
+    "rolling_resistance_scale": Change("-", _one,
+                                       "factor on every ball's rolling-resistance offset"),
+    "critical_speed_scale": Change(
+        "-", _one, "factor s on the critical speeds ``sqrt(k / M)`` through the supported mass "
+        "``M / s^2`` (a load: laundry, sample tubes); the rotor carries the change, its polar "
+        "inertia in proportion to its mass (a load spread like the rotor)", rates=True),
+    "support_damping_scale": Change("-", _one, "factor on the support damping (both axes)",
+                                    rates=True),
+    "fluid_temperature": Change("K", lambda scene: scene.fluid_temperature,
+                                "the balancer fluid's temperature (its viscosity and density: "
+                                ":func:`abb_gym.physics.fluids.fluid_properties`)"),
 }
+
+#: the changes that alter a machine's mass or support damping, and so the rates that bound a
+#: fixed step (:func:`machine_rates`) and its reference amplitudes
+RATE_CHANGES = tuple(name for name, change in CHANGES.items() if change.rates)
+
+
+if __doc__:
+    __doc__ += "\n".join(f"* ``{name}`` [{change.unit}]: {change.doc}"
+                         for name, change in CHANGES.items()) + "\n"
 
 
 def _check_names(values: dict[str, Any]) -> None:
@@ -67,12 +86,51 @@ def _check_names(values: dict[str, Any]) -> None:
         raise ValueError(f"unknown machine change(s) {unknown}; allowed: {list(CHANGES)}")
 
 
-def loaded_rotor_mass(scene: Scene, critical_speed_scale):
+class _Values(NamedTuple):
+    """The changes of one variant (floats) or of many (arrays over them), each its nominal
+    value where it is not given (or None)."""
+
+    imbalance: Any    # [kg m]
+    drag: Any         # factor on the race drag
+    rolling: Any      # factor on the rolling resistance
+    critical: Any     # factor s on the critical speeds
+    damping: Any      # factor on the support damping
+    temperature: Any  # [K] the fluid's
+
+
+def _values(scene: Scene, values: dict[str, Any], n: int | None = None) -> _Values:
+    """``values`` (change name -> value) as :class:`_Values`: floats, or with ``n`` arrays of
+    ``n`` variants (one number broadcast)."""
+    _check_names(values)
+
+    def value(name: str):
+        given = values.get(name)
+        if n is None:
+            return float(CHANGES[name].nominal(scene) if given is None else given)
+        if given is None:
+            return np.full(n, float(CHANGES[name].nominal(scene)))
+        column = np.asarray(given, float)
+        # (read only here; np.broadcast_to costs microseconds per reset and column)
+        return column if column.shape == (n,) else np.broadcast_to(column, (n,))
+
+    return _Values(value("imbalance"), value("ball_drag_scale"), value("rolling_resistance_scale"),
+                   value("critical_speed_scale"), value("support_damping_scale"),
+                   value("fluid_temperature"))
+
+
+def _at_temperature(scene: Scene, temperature: float) -> dict[str, float]:
+    """The Scene change that puts the fluid of ``scene`` at ``temperature`` [K] (none at the
+    scene's own temperature)."""
+    return ({} if temperature == scene.fluid_temperature
+            else {"fluid_temperature": float(temperature)})
+
+
+def loaded_rotor_mass(scene: Scene, scale):
     """Rotor mass [kg] that scales the critical speeds ``sqrt(k / M)`` of ``scene`` by
-    ``critical_speed_scale`` s (a number or an array): the supported mass becomes ``M / s^2``
+    the factor ``scale`` s (a number or an array): the supported mass becomes ``M / s^2``
     and the rotor (with its load) carries all of the change, ``M / s^2 - sum m_i``; exactly the
     scene's rotor mass for s = 1."""
-    s = np.asarray(critical_speed_scale, float)
+    s = np.asarray(scale, float)
     loaded = scene.total_mass / (s * s) - float(sum(scene.ball_mass))
     out = np.where(s == 1.0, scene.rotor_mass, loaded)
     return float(out) if out.ndim == 0 else out
@@ -100,36 +158,25 @@ def rotor_eccentricity(scene: Scene, imbalance: np.ndarray, rotor_mass=None) -> 
 def variant_scene(scene: Scene, **values: float) -> Scene:
     """``scene`` with the changes ``values`` (names of :data:`CHANGES`; module docstring);
     raises SceneError if the changed scene is not valid."""
-    _check_names(values)
-    v = {name: float(values.get(name, nominal(scene))) for name, nominal in CHANGES.items()}
+    v = _values(scene, values)
     changes: dict[str, Any] = {}
     mass = scene.rotor_mass
-    crit = v["critical_speed_scale"]
-    if crit != 1.0:
-        mass = loaded_rotor_mass(scene, crit)
+    if v.critical != 1.0:
+        mass = loaded_rotor_mass(scene, v.critical)
         changes["rotor_mass"] = mass
         changes["rotor_polar_inertia"] = loaded_polar_inertia(scene, mass)
-    if v["imbalance"] != scene.imbalance or mass != scene.rotor_mass:
-        changes["rotor_eccentricity"] = v["imbalance"] / mass
-    damp = v["support_damping_scale"]
-    if damp != 1.0:
-        changes["support_damping_x"] = scene.support_damping_x * damp
-        changes["support_damping_y"] = scene.support_damping_y * damp
-    drag = v["ball_drag_scale"]
-    if drag != 1.0:
-        changes["ball_drag"] = [x * drag for x in scene.ball_drag]
-    roll = v["rolling_resistance_scale"]
-    if roll != 1.0:
-        changes["ball_rolling_resistance"] = [x * roll for x in scene.ball_rolling_resistance]
-    if v["fluid_temperature"] != scene.fluid_temperature:
-        changes["fluid_temperature"] = v["fluid_temperature"]
+    if v.imbalance != scene.imbalance or mass != scene.rotor_mass:
+        changes["rotor_eccentricity"] = v.imbalance / mass
+    if v.damping != 1.0:
+        changes["support_damping_x"] = scene.support_damping_x * v.damping
+        changes["support_damping_y"] = scene.support_damping_y * v.damping
+    if v.drag != 1.0:
+        changes["ball_drag"] = [x * v.drag for x in scene.ball_drag]
+    if v.rolling != 1.0:
+        changes["ball_rolling_resistance"] = [x * v.rolling
+                                              for x in scene.ball_rolling_resistance]
+    changes.update(_at_temperature(scene, v.temperature))
     return scene.replace(**changes) if changes else scene
-
-
-def _column(values: dict[str, Any], name: str, scene: Scene, n: int) -> np.ndarray:
-    if values.get(name) is None:
-        return np.full(n, float(CHANGES[name](scene)))
-    return np.broadcast_to(np.asarray(values[name], float), (n,))
 
 
 def packed_variants(scene: Scene, n: int, **values) -> tuple[np.ndarray, np.ndarray]:
@@ -137,48 +184,38 @@ def packed_variants(scene: Scene, n: int, **values) -> tuple[np.ndarray, np.ndar
     N_BALL_PARAMS): ``values`` maps change names (:data:`CHANGES`) to arrays over the variants
     (or one number; a missing or None change is the nominal value).  Equal bit for bit to
     packing each :func:`variant_scene` (module docstring)."""
-    _check_names(values)
     p0, b0 = mdl.pack_parameters(scene)
     p = np.repeat(p0[None], n, axis=0)
     b = np.repeat(b0[None], n, axis=0)
-    imbalance = _column(values, "imbalance", scene, n)
-    critical = _column(values, "critical_speed_scale", scene, n)
-    damping = _column(values, "support_damping_scale", scene, n)
-    drag = _column(values, "ball_drag_scale", scene, n)
-    roll = _column(values, "rolling_resistance_scale", scene, n)
-    temperature = _column(values, "fluid_temperature", scene, n)
-    if np.any(critical != 1.0):
-        mass = np.asarray(loaded_rotor_mass(scene, critical), float).reshape(n)
+    v = _values(scene, values, n)
+    if np.any(v.critical != 1.0):
+        mass = np.asarray(loaded_rotor_mass(scene, v.critical), float).reshape(n)
         p[:, mdl.P_MASS] = mass + float(sum(scene.ball_mass))          # Scene.total_mass
         p[:, mdl.P_J] = loaded_polar_inertia(scene, mass)
-        p[:, mdl.P_U0] = mass * rotor_eccentricity(scene, imbalance, mass)
+        p[:, mdl.P_U0] = mass * rotor_eccentricity(scene, v.imbalance, mass)
     else:
-        p[:, mdl.P_U0] = scene.rotor_mass * rotor_eccentricity(scene, imbalance)
-    scaled = damping != 1.0
-    p[scaled, mdl.P_CX] = scene.support_damping_x * damping[scaled]
-    p[scaled, mdl.P_CY] = scene.support_damping_y * damping[scaled]
+        p[:, mdl.P_U0] = scene.rotor_mass * rotor_eccentricity(scene, v.imbalance)
+    scaled = v.damping != 1.0
+    p[scaled, mdl.P_CX] = scene.support_damping_x * v.damping[scaled]
+    p[scaled, mdl.P_CY] = scene.support_damping_y * v.damping[scaled]
     a = scene.arrays()
-    scaled = drag != 1.0
-    b[scaled, :, mdl.B_BETA] = (a["ball_drag"][None, :] * drag[scaled, None]
+    scaled = v.drag != 1.0
+    b[scaled, :, mdl.B_BETA] = (a["ball_drag"][None, :] * v.drag[scaled, None]
                                 * scene.race_radius ** 2)
-    scaled = roll != 1.0
-    rr = a["ball_rolling_resistance"][None, :] * roll[scaled, None]
+    scaled = v.rolling != 1.0
+    rr = a["ball_rolling_resistance"][None, :] * v.rolling[scaled, None]
     b[scaled, :, mdl.B_MUR] = rr / a["ball_radius"]
     p[scaled, mdl.P_ROLL] = np.where((rr > 0).any(axis=1), 1.0, 0.0)  # Scene.effects
-    warmer = temperature != scene.fluid_temperature
-    for t in np.unique(temperature[warmer]):
-        # the fluid's columns (viscosity and density) as pack_parameters computes them for the
-        # scene at that temperature; the drag and rolling-resistance columns are not the
-        # fluid's and keep their scaling
-        rows = warmer & (temperature == t)
-        b_t = mdl.pack_parameters(scene.replace(fluid_temperature=float(t)))[1]
-        b[np.ix_(rows, np.arange(b.shape[1]), FLUID_COLUMNS)] = b_t[:, FLUID_COLUMNS]
+    for t in np.unique(v.temperature):
+        warmer = _at_temperature(scene, t)
+        if warmer:
+            # the fluid's columns (viscosity and density) as pack_parameters computes them for
+            # the scene at that temperature; the drag and rolling-resistance columns are not
+            # the fluid's and keep their scaling
+            rows = v.temperature == t
+            b_t = mdl.pack_parameters(scene.replace(**warmer))[1]
+            b[np.ix_(rows, np.arange(b.shape[1]), FLUID_COLUMNS)] = b_t[:, FLUID_COLUMNS]
     return p, b
-
-
-#: the changes that alter a machine's mass or support damping, and so the rates that bound a
-#: fixed step (:func:`machine_rates`) and its reference amplitudes
-RATE_CHANGES = ("critical_speed_scale", "support_damping_scale")
 
 
 def rates_vary(values: dict[str, Any]) -> bool:
@@ -204,9 +241,7 @@ def references(scene: Scene, p: np.ndarray, operating_speed: float, **values) ->
     changes, as given to :func:`packed_variants`), each equal to what the functions of
     :mod:`abb_gym.physics.rotor` give for its :func:`variant_scene`."""
     n = p.shape[0]
-    imbalance = _column(values, "imbalance", scene, n)
-    critical = _column(values, "critical_speed_scale", scene, n)
-    damping = _column(values, "support_damping_scale", scene, n)
+    v = _values(scene, values, n)
     varied = rates_vary(values)
     mass = p[:, mdl.P_MASS]
     if varied:
@@ -219,14 +254,14 @@ def references(scene: Scene, p: np.ndarray, operating_speed: float, **values) ->
     if varied:
         # the machine of each variant with its balancer off
         a_peak, a_op = rotor.reference_amplitudes(scene, operating_speed, u_ref, mass=mass,
-                                                  damping_scale=damping)
-        rotor_mass = (np.asarray(loaded_rotor_mass(scene, critical), float).reshape(n)
-                      if np.any(critical != 1.0) else None)
-        ref = reference_length(rotor_eccentricity(scene, imbalance, rotor_mass),
+                                                  damping_scale=v.damping)
+        rotor_mass = (np.asarray(loaded_rotor_mass(scene, v.critical), float).reshape(n)
+                      if np.any(v.critical != 1.0) else None)
+        ref = reference_length(rotor_eccentricity(scene, v.imbalance, rotor_mass),
                                scene.race_eccentricity, scene.balancing_capacity, mass)
     else:
         a_peak, a_op = rotor.reference_amplitudes(scene, operating_speed, u_ref)
-        ref = reference_length(rotor_eccentricity(scene, imbalance), scene.race_eccentricity,
+        ref = reference_length(rotor_eccentricity(scene, v.imbalance), scene.race_eccentricity,
                                scene.balancing_capacity, scene.total_mass)
     return References(np.broadcast_to(np.asarray(u_ref, float), (n,)),
                       np.broadcast_to(np.asarray(rotor.best_residual(scene, u0), float), (n,)),
@@ -249,27 +284,25 @@ def check_machine(scene: Scene, where: str, error: type[ValueError], **values: f
     """Raise ``error`` naming ``where`` unless the variant of ``scene`` with the changes
     ``values`` (names of :data:`CHANGES`) is a valid machine (a rotor mass left, within the
     scene's bounds) whose rest position, under gravity, lies inside the housing clearance."""
-    _check_names(values)
-    crit = float(values.get("critical_speed_scale", 1.0))
-    damp = float(values.get("support_damping_scale", 1.0))
-    others = {name: float(v) for name, v in values.items() if name not in RATE_CHANGES
-              and float(v) != CHANGES[name](scene)}
-    if crit == 1.0 and damp == 1.0 and not others:
+    v = _values(scene, values)
+    # the changes that make this variant, in the errors' words
+    given = [f"{name}={float(x):g}" for name, x in values.items()
+             if x is not None and float(x) != CHANGES[name].nominal(scene)]
+    if not given:
         return
+    machine = " and ".join(given)
     balls = float(sum(scene.ball_mass))
-    if loaded_rotor_mass(scene, crit) <= 0.0:
-        raise error(f"{where}: with critical_speed_scale={crit:g} the supported mass "
-                    f"M / s^2 = {scene.total_mass / crit ** 2:g} kg would not even carry the "
-                    f"balls ({balls:g} kg): no rotor mass left; use a smaller scale (below "
+    if loaded_rotor_mass(scene, v.critical) <= 0.0:
+        raise error(f"{where}: with {machine} the supported mass M / s^2 = "
+                    f"{scene.total_mass / v.critical ** 2:g} kg would not even carry the balls "
+                    f"({balls:g} kg): no rotor mass left; use a smaller scale (below "
                     f"{math.sqrt(scene.total_mass / balls):.4g})")
     try:
         sc = variant_scene(scene, **values)
     except (SceneError, ValueError) as exc:
-        machine = f"critical_speed_scale={crit:g} and support_damping_scale={damp:g}" + "".join(
-            f" and {name}={v:g}" for name, v in others.items())
         raise error(f"{where}: the machine with {machine} is not a valid scene: {exc}") from None
     sag = math.hypot(*rotor.static_deflection(sc))
     if sag >= scene.housing_clearance:
-        raise error(f"{where}: with critical_speed_scale={crit:g} the supported mass "
-                    f"{sc.total_mass:g} kg sags {sag:g} m under gravity, beyond the housing "
-                    f"clearance {scene.housing_clearance:g} m; use a larger scale")
+        raise error(f"{where}: with {machine} the supported mass {sc.total_mass:g} kg sags "
+                    f"{sag:g} m under gravity, beyond the housing clearance "
+                    f"{scene.housing_clearance:g} m; use a larger scale")
