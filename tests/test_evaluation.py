@@ -621,3 +621,17 @@ def test_candidates_scored_on_several_ball_starts_take_the_mean_over_all():
                                                  rel=1e-12)
     with pytest.raises(ValueError, match="ball_draws must be an integer >= 0"):
         tuner.tune_per_machine("yoshida_odd", episodes=1, budget=1, ball_draws=-1)
+
+
+def test_a_report_records_the_environment_keywords(tmp_path):
+    """The integrator (and every other keyword but the reward) is part of the test set: the
+    same policy on the same seeds gives other episodes under another integrator, so the
+    report says which one ran."""
+    import json
+    res = evaluate(SPEED, "yoshida_odd", "baseline:ramp", episodes=2, seed=0,
+                   integrator="etdrk4", control_interval=0.05)
+    assert res.env_kwargs == {"integrator": "etdrk4", "control_interval": 0.05}
+    paths = write_report([res], tmp_path)
+    assert json.loads(paths["json"].read_text())["env_kwargs"] == res.env_kwargs
+    assert "Environment keywords: control_interval=0.05, integrator=etdrk4." in (
+        paths["summary"].read_text())

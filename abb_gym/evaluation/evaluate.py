@@ -86,6 +86,9 @@ class EvaluationResult:
     # the resolved reward weights of the test set, and where they came from
     reward_weights: dict[str, float] = field(default_factory=dict)
     reward_source: str = ""
+    # the environment's other keywords (integrator, control_interval, observation settings):
+    # the same agent on the same seeds gives other episodes under another integrator
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         return summarise(self.episodes)
@@ -319,7 +322,8 @@ def evaluate(env_id: str, scene: str, policy: str, episodes: int = 100, seed: in
         parts = executor.map(_run_chunk_task, tasks, desc=f"evaluate {policy}")
     result = EvaluationResult(policy, env_id, scene, preset, seed,
                               reward_weights=reward_weights(env_id, scene, preset, **env_kwargs),
-                              reward_source=source)
+                              reward_source=source,
+                              env_kwargs={k: v for k, v in env_kwargs.items() if k != "reward"})
     for eps, rolls, params in parts:
         result.episodes.extend(eps)
         result.rollouts.update(rolls)

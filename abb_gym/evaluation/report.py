@@ -158,6 +158,9 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
             f"window in the operating band); residual_vibration over those.\n\n")
     if first.reward_weights:
         head += reward_line(first) + "\n\n"
+    if first.env_kwargs:
+        head += ("Environment keywords: " + ", ".join(f"{k}={v}" for k, v in
+                                                   sorted(first.env_kwargs.items())) + ".\n\n")
     if len({r.env_id for r in results}) > 1:
         head += ("Column env: the baselines that DwellProfile's one action cannot express "
                  "ran on RunUpSpeed, on the same machines (same preset and seeds).\n\n")
@@ -175,7 +178,7 @@ def write_report(results: Sequence[EvaluationResult], out: str | Path,
     rows = [e for r in results for e in r.episodes]
     payload = {"env_id": first.env_id, "scene": first.scene, "preset": first.preset,
                "seed": first.seed, "reward_weights": first.reward_weights,
-               "reward_source": first.reward_source,
+               "reward_source": first.reward_source, "env_kwargs": first.env_kwargs,
                "metrics": {k: unit(k, results) for k in METRICS},
                "policies": [{"policy": r.policy, "env_id": r.env_id, "params": r.params, "summary": r.summary(),
                              "episodes": r.episodes} for r in results],
