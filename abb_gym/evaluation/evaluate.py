@@ -346,13 +346,17 @@ def reward_weights(env_id: str, scene: Any, preset: str = "test", **env_kwargs: 
 
 def summarise(episodes: list[dict]) -> dict[str, Any]:
     """Mean and 95 % confidence interval of every metric (shares: Wilson interval).
-    ``n`` counts the finite values (time to speed is NaN for runs that never got there)."""
+    ``n`` counts the finite values (time to speed is NaN for runs that never got there).  A
+    metric the episodes do not carry (runs kept from before it existed, or not measured: the
+    oracle's runs have no hold) has a NaN mean and ``n`` 0, shown as n/a."""
     out: dict[str, Any] = {"episodes": len(episodes),
                            "length_unit": episodes[0].get("length_unit", "W_r/e")
                            if episodes else "W_r/e"}
     for key in METRICS:
-        vals = np.array([float(e[key]) for e in episodes])
-        if key in SHARES:
+        vals = np.array([float(e.get(key, math.nan)) for e in episodes])
+        if key in SHARES and not all(key in e for e in episodes):
+            out[key] = {"mean": math.nan, "ci_low": math.nan, "ci_high": math.nan, "n": 0}
+        elif key in SHARES:
             p, lo, hi = share_ci(int(np.nansum(vals)), len(vals))
             out[key] = {"mean": p, "ci_low": lo, "ci_high": hi, "n": len(vals)}
         else:
