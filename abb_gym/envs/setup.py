@@ -192,10 +192,6 @@ class EnvSetup:
         states (which a caller rolls back on error): :func:`episodes.commit` writes it."""
         return episodes.prepare(self, table, rows, episodes.draw_rows(self, rngs, options))
 
-    def new_table(self, n: int) -> episodes.EpisodeTable:
-        """An episode table of ``n`` rows for this environment."""
-        return episodes.EpisodeTable(self.scene, n, self.redistribution_events)
-
     def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
                    rngs: list, options: list | None = None) -> None:
         """Draw the episodes of ``rows`` and write them, all rows at once
