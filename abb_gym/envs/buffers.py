@@ -167,16 +167,12 @@ class Buffers:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self.args = self.kernel_args()
-        #: the current episode of every row (:mod:`abb_gym.envs.episodes`)
-        self.table = EpisodeTable(setup.scene, n, setup.redistribution_events)
 
     def record_history(self, steps: int) -> None:
         """Record the first row's history from now on, ``steps`` control interval boundaries
         (a single environment asked to render after it was made without a history)."""
         self.trace = np.zeros((1, steps, T_BALLS + self.n_balls))
         self.args = self.kernel_args()
-        #: the current episode of every row (:mod:`abb_gym.envs.episodes`)
-        self.table = EpisodeTable(setup.scene, n, setup.redistribution_events)
 
     def history(self, i: int) -> dict[str, np.ndarray]:
         """Row ``i``'s recorded history so far, one entry per control interval boundary
