@@ -9,7 +9,6 @@ what an action means is :mod:`abb_gym.envs.actions`.
 from __future__ import annotations
 
 import textwrap
-from functools import cached_property
 from typing import Any
 
 import gymnasium as gym
@@ -253,29 +252,18 @@ class BalancerEnv(SetupAccess, gym.Env):
         self.last_profile = None
         self._nq = 3 + self.setup.scene.ball_count
         self._dt = self.setup.control_interval
+        self._bind()
 
     # ------------------------------------------------------------------ internals
-    # views of the buffers' only row, made at first use (and again after unpickling, which
-    # drops them: a view would unpickle as a copy)
-    @cached_property
-    def _act_row(self) -> np.ndarray:
-        return self._bufs.act[0]
-
-    @cached_property
-    def _obs_row(self) -> np.ndarray:
-        return self._bufs.observations[0]
-
-    @cached_property
-    def _out_row(self) -> np.ndarray:
-        return self._bufs.out[0]
-
-    @cached_property
-    def _st_row(self) -> np.ndarray:
-        return self._bufs.st[0]
-
-    @cached_property
-    def _s_row(self) -> np.ndarray:
-        return self._bufs.s[0]
+    def _bind(self) -> None:
+        """Cache views of the buffers' only row (made again after unpickling: a view would
+        unpickle as a copy)."""
+        bf = self._bufs
+        self._act_row = bf.act[0]
+        self._obs_row = bf.observations[0]
+        self._out_row = bf.out[0]
+        self._st_row = bf.st[0]
+        self._s_row = bf.s[0]
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
@@ -288,6 +276,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         self.__dict__.update(state)
         self._renderer = None
         self._step_fn = None
+        self._bind()
 
     @property
     def episode_scene(self):
