@@ -92,7 +92,7 @@ def test_rows_written_at_once_equal_each_episode_scene_packed(scene):
               "critical_speed_scale": crit, "support_damping_scale": damp,
               "fluid_temperature": temp}
     p, b = variants.packed_variants(sc, n, **values)
-    table = setup.new_table(n)
+    table = episodes.EpisodeTable(setup.scene, n, setup.redistribution_events)
     pending = episodes.prepare(setup, table, np.arange(n), {
         **values, "imbalance_phase": np.zeros(n), "ball_angles": np.zeros((n, sc.ball_count))})
     for r in range(n):

@@ -31,7 +31,7 @@ from abb_gym.configuration import ConfigError, build, specs
 from abb_gym.envs import PresetError, episode_steps
 from abb_gym.envs.tasks import TASKS
 
-from abb_gym.envs import checks as env_setup
+from abb_gym.envs import buffers as env_setup
 from abb_gym.envs.config import _SECTIONS, EnvConfig, RewardWeights
 from abb_gym.physics import SimulationError
 from abb_gym.physics.scene import list_scenes, load_scene

@@ -73,7 +73,7 @@ def _check_episode_memory(args, env_kwargs) -> None:
     """The episodes of one candidate run as the sub-environments of one vector environment
     with their histories: ``--episodes 1e12`` would fill the memory (or hang building the
     episode list) long before the first candidate; refused here, naming the option."""
-    from ..envs.checks import check_memory
+    from ..envs.buffers import check_memory
     from ..evaluation.evaluate import make_env
     env = make_env(args.env, args.scene, args.preset, 1, **env_kwargs)
     try:

@@ -19,8 +19,7 @@ from gymnasium.utils import seeding
 from .actions import checked_action
 from .display import SINGLE_METADATA, check_display
 from .info import step_info
-from .layout import (ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K,
-                     T_BALLS)
+from .layout import ACT_CLIPPED, ACT_NONFINITE, O_ACTFLAG, O_REWARD, O_TERM, O_TRUNC, S_K
 from .rendering import Renderer
 from . import episode_parameters, episodes, observation
 from .buffers import Buffers
@@ -243,40 +242,40 @@ class BalancerEnv(SetupAccess, gym.Env):
                              render_fps=max(1, round(1.0 / self.setup.control_interval)))
         check_flag(record_history, "record_history")
         self._bufs = Buffers(self.setup, 1, n_trace=1 if (render_mode or record_history) else 0)
+        self._table = self._bufs.table
+        self._step_fn = None  # the compiled step, fetched at the first step
         self._renderer: Renderer | None = None
-        self._table = self.setup.new_table(1)
         self._episode: Episode | None = None
         self._done = False
         self._warned_clip = False
         self._warned_done = False
         self.last_profile = None
+        self._nq = 3 + self.setup.scene.ball_count
+        self._dt = self.setup.control_interval
         self._bind()
 
     # ------------------------------------------------------------------ internals
     def _bind(self) -> None:
-        """Cache views and the kernel argument tuple (rebuilt after unpickling)."""
+        """Cache views of the buffers' only row (made again after unpickling: a view would
+        unpickle as a copy)."""
         bf = self._bufs
-        self._args = bf.kernel_args()
-        self._step_fn = None  # the compiled step, fetched at the first step
         self._act_row = bf.act[0]
         self._obs_row = bf.observations[0]
         self._out_row = bf.out[0]
         self._st_row = bf.st[0]
         self._s_row = bf.s[0]
-        nq = 3 + self.setup.scene.ball_count
-        self._nq = nq
-        self._dt = self.setup.control_interval
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_renderer", "_args", "_step_fn", "_act_row", "_obs_row", "_out_row",
-                    "_st_row", "_s_row"):
+        for key in ("_renderer", "_step_fn", "_act_row", "_obs_row", "_out_row", "_st_row",
+                    "_s_row"):
             state.pop(key, None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._renderer = None
+        self._step_fn = None
         self._bind()
 
     @property
@@ -355,11 +354,12 @@ class BalancerEnv(SetupAccess, gym.Env):
             if extra:
                 self.last_profile = extra.pop("profile", None)
         self._act_row[...] = a  # (in place, converted to float64; [:] cost 0.3 us more)
+        bf = self._bufs
         step = self._step_fn
         if step is None:
-            step = self._step_fn = self._bufs.step_function()
-        step(*self._args)
-        self._bufs.push_frames()
+            step = self._step_fn = bf.step_function()
+        step(*bf.args)
+        bf.push_frames()
         out = self._out_row
         flag = out[O_ACTFLAG]
         if flag == ACT_NONFINITE:
@@ -403,9 +403,7 @@ class BalancerEnv(SetupAccess, gym.Env):
                                       self.setup.episode_length, self.render_mode)
         bf = self._bufs
         if bf.trace.shape[0] == 0:
-            bf.trace = np.zeros((1, self.setup.max_steps + 1,
-                                 T_BALLS + self.setup.scene.ball_count))
-            self._bind()
+            bf.record_history(self.setup.max_steps + 1)
         k = int(self._st_row[S_K]) if self._episode is not None else 0
         return self._renderer.draw(self._s_row, bf.trace[0, :k + 1])
 

@@ -1,11 +1,16 @@
 """The arrays of an environment's rows and the blocks its compiled step works in.
 
 :class:`Buffers` holds one row per environment (state, parameters, drive rows, bookkeeping,
-observation, outputs, the recorded history) and the blocks of lanes of the compiled step
-(:mod:`abb_gym.envs.kernel`, :class:`abb_gym.physics.batch.Blocks`).
+observation, outputs, the recorded history, the current episode's parameters) and the
+blocks of lanes of the compiled step (:mod:`abb_gym.envs.kernel`,
+:class:`abb_gym.physics.batch.Blocks`), packed once as the step's arguments.  The single and
+the vector environment build theirs the same way: an :class:`~abb_gym.envs.setup.EnvSetup`,
+then :class:`Buffers`.  Their size is checked against the machine's memory first
+(:func:`check_memory`, which counts the same arrays).
 """
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -15,12 +20,66 @@ from ..physics import drive_law as dl
 from ..physics import model as mdl
 from ..physics.specialise import resolve_kernel
 from . import kernel
-from .checks import check_memory
-from .kernel import G_HELD, N_G_ENV, observe_rows
+from .episodes import EpisodeTable
+from .kernel import G_HELD, N_G_ENV, entry_point, observe_rows
 from .layout import (N_OUT, N_ST, S_DONE, S_DTMAX, S_K, S_USCALE, T_BALLS, T_T, T_VIB,
                      T_VIBMAX, T_W, T_X, T_Y)
 
-__all__ = ["Buffers"]
+__all__ = ["Buffers", "MEMORY_LIMIT", "row_bytes", "trace_bytes", "check_memory"]
+
+
+def _physical_memory() -> float:
+    """The machine's memory [bytes] (16 GiB where the system does not say)."""
+    try:
+        return float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return 16.0 * 2 ** 30
+
+
+#: Largest buffers [bytes] an environment allocates: the machine's memory.  A request beyond
+#: it (``num_envs=2**40``, or a recorded history of 1e10 control intervals) is refused with a
+#: ValueError naming the argument, not left to numpy's MemoryError or the system's OOM killer.
+MEMORY_LIMIT = _physical_memory()
+
+
+def row_bytes(setup: Any) -> int:
+    """Bytes per environment of :class:`Buffers` (row arrays and compiled-step lanes, without
+    the history) and of a vector environment's batched spaces."""
+    nb = setup.scene.ball_count
+    ns = 2 * (3 + nb)
+    rows = (setup.n_actions + ns + mdl.N_PARAMS + nb * mdl.N_BALL_PARAMS
+            + setup.n_rows * dl.N_DRIVE + N_ST + N_OUT + 2)
+    lanes = (16 * ns + mdl.N_PARAMS + nb * (mdl.N_BALL_PARAMS + mdl.WORK_COLUMNS) + dl.N_DRIVE
+             + batch.N_F + max(batch.N_G, N_G_ENV))
+    spaces_bounds = 2 * 4 * (setup.obs_dim + setup.n_actions)  # float32 low and high
+    return 8 * (rows + lanes) + 4 * setup.obs_dim + 2 + spaces_bounds
+
+
+def trace_bytes(setup: Any) -> int:
+    """Bytes of one environment's recorded history (one row per control interval)."""
+    return 8 * (setup.max_steps + 1) * (T_BALLS + setup.scene.ball_count)
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.3g} GB"
+
+
+def check_memory(setup: Any, n: int, n_trace: int) -> None:
+    """Raise ValueError, naming the argument and what to change, if the buffers of ``n``
+    environments with ``n_trace`` histories need more than :data:`MEMORY_LIMIT`."""
+    rows = float(n) * row_bytes(setup)
+    trace = float(min(n_trace, n)) * trace_bytes(setup)
+    if rows > MEMORY_LIMIT:
+        raise ValueError(f"num_envs = {n} needs {_gb(rows)} of buffers ({row_bytes(setup)} "
+                         f"bytes per sub-environment), more than this machine's "
+                         f"{_gb(MEMORY_LIMIT)}: use fewer sub-environments")
+    if rows + trace > MEMORY_LIMIT:
+        raise ValueError(f"the history kept by record_history=True or render_mode ("
+                         f"{setup.max_steps + 1} control intervals x {min(n_trace, n)} "
+                         f"environment(s)) needs {_gb(trace)}, more than this machine's "
+                         f"{_gb(MEMORY_LIMIT)}: record no history, or shorten the episode "
+                         f"(episode_length = {setup.episode_length:.6g} s, control_interval = "
+                         f"{setup.control_interval:g} s) or use fewer sub-environments")
 
 
 class Buffers:
@@ -58,11 +117,16 @@ class Buffers:
         # blocks of one lane (a single environment, a few sub-environments): the kernel also
         # takes the lane count as a constant
         self.spec = setup.spec | (mdl.SPEC_ONE_LANE if self.blocks.lanes == 1 else 0)
+        #: the compiled step's arguments (:meth:`kernel_args`), packed once
+        self.args = self.kernel_args()
+        #: the current episode of every row (:mod:`abb_gym.envs.episodes`)
+        self.table = EpisodeTable(setup.scene, n, setup.redistribution_events)
+        stepper = entry_point(self.blocks.s.shape[0])
         self.kernel = resolve_kernel(kernel, self.blocks.lanes, cached_ok=True)
         self._step = None
         if self.kernel == "cached":
             # "auto" on a few lanes: the specialised kernel if it needs no compiling
-            self._step = self._stepper().cached_entry(*self.kernel_args())
+            self._step = stepper.cached_entry(*self.args)
             self.kernel = "generic" if self._step is None else "specialised"
 
     def step_arrays(self) -> tuple:
@@ -73,22 +137,19 @@ class Buffers:
 
     def kernel_args(self) -> tuple:
         """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``: the packed
-        :meth:`step_arrays` (rebuild them after replacing any of those arrays), the ball count
-        and the effect bits."""
+        :meth:`step_arrays`, the ball count and the effect bits (packed anew into
+        :attr:`args` whenever one of those arrays is replaced)."""
         return kernel.pack_step_arrays(*self.step_arrays()), self.n_balls, self.spec
 
     def step_function(self):
-        """The compiled step's entry point, called with :meth:`kernel_args` (compiled or
-        loaded from the cache on the first call)."""
+        """The compiled step's entry point, called with :attr:`args` (compiled or loaded from
+        the cache on the first call)."""
         if self._step is None:
-            self._step = self._stepper().entry(*self.kernel_args(),
-                                               generic=self.kernel == "generic")
+            self._step = entry_point(self.blocks.s.shape[0]).entry(
+                *self.args, generic=self.kernel == "generic")
         blocks = self.blocks.s.shape[0]
         # the blocks in parallel on the threads that the free CPUs allow (batch.ParallelCall)
         return batch.ParallelCall(self._step, blocks) if blocks > 1 else self._step
-
-    def _stepper(self):
-        return kernel.step_parallel if self.blocks.s.shape[0] > 1 else kernel.step_serial
 
     def sort_lanes(self) -> None:
         """Group rows of equal step size into the same blocks (after resets), sorted per
@@ -100,7 +161,18 @@ class Buffers:
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_step"] = None  # compiled entry points do not pickle
+        del state["args"]  # nor does the pack, which must hold the unpickled arrays
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.args = self.kernel_args()
+
+    def record_history(self, steps: int) -> None:
+        """Record the first row's history from now on, ``steps`` control interval boundaries
+        (a single environment asked to render after it was made without a history)."""
+        self.trace = np.zeros((1, steps, T_BALLS + self.n_balls))
+        self.args = self.kernel_args()
 
     def history(self, i: int) -> dict[str, np.ndarray]:
         """Row ``i``'s recorded history so far, one entry per control interval boundary

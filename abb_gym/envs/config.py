@@ -65,7 +65,7 @@ from ..configuration import (ConfigError, build, check, declare, fields_table, l
 from .episode_parameters import randomize_fields
 
 __all__ = ["EnvConfig", "RewardWeights", "DwellRanges", "Randomization", "SyncVibration",
-           "Redistribution", "load_preset",
+           "Redistribution", "load_preset", "load_task_preset",
            "list_presets", "presets_dir", "PRESET_FIELDS", "PresetError", "INTEGRATORS",
            "PRECISIONS"]
 
@@ -332,3 +332,26 @@ def load_preset(preset: str | os.PathLike | Mapping[str, Any] | EnvConfig = "tra
         raise PresetError(f"{where}: field 'episode_length' must be > control_interval = "
                           f"{cfg.control_interval:g} s (got {cfg.episode_length:g} s)")
     return cfg
+
+
+def load_task_preset(task: Any, preset: Any, overrides: Mapping[str, Any] | None
+                     ) -> EnvConfig:
+    """``preset`` with the keyword ``overrides``, then the fields that ``task`` (a
+    :class:`~abb_gym.envs.tasks.Task`) fixes; an override that contradicts the task is
+    refused by name."""
+    overrides = dict(overrides or {})
+    cfg = load_preset(preset, **overrides)
+    if not task.settings:
+        return cfg
+    for key, value in task.settings.items():
+        given = overrides.get(key)
+        pairs = (value.items() if isinstance(value, Mapping) else [(None, value)])
+        for sub, want in pairs:
+            path = key if sub is None else f"{key}.{sub}"
+            asked = given if sub is None else (given.get(sub) if isinstance(given, Mapping)
+                                               else None)
+            if asked is not None and asked != want:
+                raise PresetError(f"environment preset {cfg.name!r}: field {path!r} = "
+                                  f"{asked!r} contradicts {task.env_id}, which fixes it to "
+                                  f"{want!r}")
+    return load_preset(cfg, **task.settings)

@@ -527,6 +527,12 @@ the ball count ``nb`` and the effects ``spec`` (vectorised across the lanes of a
 ``.generic`` runs the general kernel, compiled once for every scene."""
 
 
+def entry_point(n_blocks: int) -> Specialised:
+    """The compiled step of ``n_blocks`` blocks of lanes: ``step_parallel`` (the blocks in
+    parallel) for several, ``step_serial`` for one."""
+    return step_parallel if n_blocks > 1 else step_serial
+
+
 @njit(cache=True)
 def observe_rows(rows, s, p, b, st, cfg, obs, out, trace):
     """Observation (and whirl/balance outputs) of the given rows, e.g. after a reset."""

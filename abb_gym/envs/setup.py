@@ -24,9 +24,9 @@ from ..physics.methods import METHOD_IDS
 from ..physics.scene import Scene, load_scene
 from ..physics.trajectory import state_names
 from . import episodes, observation, redistribution, tasks
-from .actions import ActionModel, action_model
+from .actions import action_model
 from .checks import check_flag
-from .config import EnvConfig, PresetError, load_preset
+from .config import EnvConfig, PresetError, load_task_preset
 from .display import check_info_level
 from .layout import (C_AMAX, C_BACKSTOP, C_BAL_TOL, C_BAND, C_CLEAR, C_DT, C_FILT,
                      C_INFO_FULL, C_KIND, C_METHOD, C_NACT, C_NMAX, C_OBS, C_OVERSPEED,
@@ -55,15 +55,12 @@ class EnvSetup:
                  observe_balls: bool = False, max_episode_steps: int | None = None,
                  overrides: Mapping[str, Any] | None = None):
         self.task = tasks.get(task)
-        self.actions: ActionModel = action_model(self.task.action)
-        #: the action model's name (``torque``, ``speed``, ``dwell``, ...)
-        self.kind = self.task.action
         scene = self.task.default_scene if scene is None else scene
         preset = self.task.default_preset if preset is None else preset
         if not isinstance(scene, (str, Scene)) and not hasattr(scene, "__fspath__"):
             raise ValueError(f"scene must be a scene name, a path or a Scene (got {scene!r})")
         self.scene = load_scene(scene)
-        self.config: EnvConfig = _task_config(self.task, preset, overrides)
+        self.config: EnvConfig = load_task_preset(self.task, preset, overrides)
         self.observe_balls = check_flag(observe_balls, "observe_balls")
         if max_episode_steps is not None:
             if isinstance(max_episode_steps, bool) or not isinstance(
@@ -82,7 +79,10 @@ class EnvSetup:
         dw = cfg.dwell
         self.dwell_acceleration = dw.runup_acceleration * self.max_acceleration
         self.nominal_runup_time = self.operating_speed / self.dwell_acceleration
-        am = self.actions
+        # what the action model decides, asked in one go now that the preset is known
+        am = self.actions = action_model(self.task.action)
+        #: the action model's name (``torque``, ``speed``, ``dwell``, ...)
+        self.kind = self.task.action
         if cfg.episode_length is not None:
             length = float(cfg.episode_length)
             given = f"field 'episode_length' = {length:g} s"
@@ -112,6 +112,11 @@ class EnvSetup:
                               f"({self.episode_length:g} s; {given})")
         am.check(self)
         self.max_speed = am.max_speed(self.operating_speed, cfg)
+        self.effort_bound = am.effort_bound(cfg)
+        self.n_actions = am.n_actions
+        self.n_rows = am.n_rows
+        overspeed_trip = am.overspeed_trip(cfg)
+        speed_bounds = am.speed_bounds(cfg)
         # observation scale: the resonance amplitude of the machine with its balancer off,
         # with the scene's imbalance
         self.vibration_scale = rotor.reference_amplitudes(sc, self.operating_speed)[0]
@@ -121,9 +126,6 @@ class EnvSetup:
         # control interval, rather than at an automatic reset in the middle of training
         episodes.check_preset_machines(self)
         episodes.check_preset_stiffness(self)
-        self.effort_bound = am.effort_bound(cfg)
-        self.n_actions = am.n_actions
-        self.n_rows = am.n_rows
         self.sync = cfg.sync_vibration.enabled
         self.frame_stack = int(cfg.frame_stack)
         self.observe_time = bool(cfg.observe_time)
@@ -147,7 +149,7 @@ class EnvSetup:
         c[C_DT] = self.control_interval
         c[C_WOP] = self.operating_speed
         c[C_BAND] = cfg.at_speed_tolerance
-        c[C_OVERSPEED] = am.overspeed_trip(cfg)
+        c[C_OVERSPEED] = overspeed_trip
         c[C_TLIM] = self.torque_limit
         c[C_AMAX] = self.max_acceleration
         c[C_CLEAR] = sc.housing_clearance
@@ -160,7 +162,7 @@ class EnvSetup:
         c[C_WV], c[C_WT], c[C_WE], c[C_WR], c[C_WF] = (w.vibration, w.time, w.effort,
                                                        w.residual, w.failure)
         c[C_NACT] = self.n_actions
-        c[C_SPEED_LO], c[C_SPEED_HI] = am.speed_bounds(cfg)
+        c[C_SPEED_LO], c[C_SPEED_HI] = speed_bounds
         c[C_VIB_HI] = self.vibration_bound
         c[C_BAL_TOL] = cfg.balance_tolerance
         c[C_TEP] = self.episode_length
@@ -189,10 +191,6 @@ class EnvSetup:
         options ``options[k]``) and compute their start, changing nothing but the generators'
         states (which a caller rolls back on error): :func:`episodes.commit` writes it."""
         return episodes.prepare(self, table, rows, episodes.draw_rows(self, rngs, options))
-
-    def new_table(self, n: int) -> episodes.EpisodeTable:
-        """An episode table of ``n`` rows for this environment."""
-        return episodes.EpisodeTable(self.scene, n, self.redistribution_events)
 
     def reset_rows(self, bufs: "Buffers", table: episodes.EpisodeTable, rows,
                    rngs: list, options: list | None = None) -> None:
@@ -254,24 +252,3 @@ class SetupAccess:
         """The resolved preset (:class:`abb_gym.envs.config.EnvConfig`)."""
         return self.setup.config
 
-
-def _task_config(task: "tasks.Task", preset: Any, overrides: Mapping[str, Any] | None
-                 ) -> EnvConfig:
-    """The preset with the keyword ``overrides``, then the fields the task fixes; an override
-    that contradicts the task is refused by name."""
-    overrides = dict(overrides or {})
-    cfg = load_preset(preset, **overrides)
-    if not task.settings:
-        return cfg
-    for key, value in task.settings.items():
-        given = overrides.get(key)
-        pairs = (value.items() if isinstance(value, Mapping) else [(None, value)])
-        for sub, want in pairs:
-            path = key if sub is None else f"{key}.{sub}"
-            asked = given if sub is None else (given.get(sub) if isinstance(given, Mapping)
-                                               else None)
-            if asked is not None and asked != want:
-                raise PresetError(f"environment preset {cfg.name!r}: field {path!r} = "
-                                  f"{asked!r} contradicts {task.env_id}, which fixes it to "
-                                  f"{want!r}")
-    return load_preset(cfg, **task.settings)

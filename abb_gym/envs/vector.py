@@ -91,7 +91,7 @@ from .layout import S_K, S_NREDIST
 from .rendering import Renderer
 from . import episodes
 from .buffers import Buffers
-from .checks import check_flag, check_memory, check_seed, draw_safely
+from .checks import check_flag, check_seed, draw_safely
 from .step_rows import StepRows, check_actions, read_step
 from .setup import EnvSetup, SetupAccess
 from .tasks import DWELL_PROFILE, RUN_UP_SPEED, RUN_UP_TORQUE
@@ -126,17 +126,16 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         check_flag(record_history, "record_history")
         n_trace = (self.num_envs if record_history
                    else min(self.num_envs, MAX_RENDERED) if render_mode else 0)
-        check_memory(self.setup, self.num_envs, n_trace)  # before the batched spaces
+        # the buffers first: their check of the machine's memory counts the batched spaces
+        self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace, kernel=kernel)
+        self._table = self._bufs.table
         self.render_mode = render_mode
         self.single_observation_space = self.setup.observation_space
         self.single_action_space = self.setup.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._bufs = Buffers(self.setup, self.num_envs, n_trace=n_trace, kernel=kernel)
-        self._args = self._bufs.kernel_args()
         self._step_fn = None  # the compiled step, fetched at the first step
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
-        self._table = self.setup.new_table(self.num_envs)
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
         self._started = False
         self._warned_clip = False
@@ -150,12 +149,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         state = self.__dict__.copy()
         state["_renderers"] = None
         state["_step_fn"] = None
-        state.pop("_args", None)
         return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._args = self._bufs.kernel_args()
 
     @property
     def kernel(self) -> str:
@@ -327,7 +321,7 @@ class BalancerVectorEnv(SetupAccess, VectorEnv):
         step = self._step_fn
         if step is None:
             step = self._step_fn = bf.step_function()
-        step(*self._args)
+        step(*bf.args)
         bf.push_frames()
         if rows.size:
             bf.observe(rows)  # (and their frame stacks start again)
