@@ -211,6 +211,10 @@ COMMON_DOC = COMMON_DOC.replace("{observation_table}", observation.doc_table()).
 __doc__ += COMMON_DOC
 
 
+#: the single environment's names for ``Buffers.first_row`` (views of its only row: action,
+#: observation, output, status, state)
+_ROW_VIEWS = ("_act_row", "_obs_row", "_out_row", "_st_row", "_s_row")
+
 class BalancerEnv(SetupAccess, gym.Env):
     """Common implementation of every task; ``gym.make`` with a registered id, or a subclass
     that names its task."""
@@ -252,23 +256,13 @@ class BalancerEnv(SetupAccess, gym.Env):
         self.last_profile = None
         self._nq = 3 + self.setup.scene.ball_count
         self._dt = self.setup.control_interval
-        self._bind()
+        # plain attributes, read at every step (a property would cost each read a call)
+        self.__dict__.update(zip(_ROW_VIEWS, self._bufs.first_row))
 
     # ------------------------------------------------------------------ internals
-    def _bind(self) -> None:
-        """Cache views of the buffers' only row (made again after unpickling: a view would
-        unpickle as a copy)."""
-        bf = self._bufs
-        self._act_row = bf.act[0]
-        self._obs_row = bf.observations[0]
-        self._out_row = bf.out[0]
-        self._st_row = bf.st[0]
-        self._s_row = bf.s[0]
-
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_renderer", "_step_fn", "_act_row", "_obs_row", "_out_row", "_st_row",
-                    "_s_row"):
+        for key in ("_renderer", "_step_fn", *_ROW_VIEWS):
             state.pop(key, None)
         return state
 
@@ -276,7 +270,7 @@ class BalancerEnv(SetupAccess, gym.Env):
         self.__dict__.update(state)
         self._renderer = None
         self._step_fn = None
-        self._bind()
+        self.__dict__.update(zip(_ROW_VIEWS, self._bufs.first_row))  # (made again by Buffers)
 
     @property
     def episode_scene(self):

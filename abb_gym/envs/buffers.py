@@ -119,6 +119,7 @@ class Buffers:
         self.spec = setup.spec | (mdl.SPEC_ONE_LANE if self.blocks.lanes == 1 else 0)
         #: the compiled step's arguments (:meth:`kernel_args`), packed once
         self.args = self.kernel_args()
+        self.first_row = self.first_row_views()
         #: the current episode of every row (:mod:`abb_gym.envs.episodes`)
         self.table = EpisodeTable(setup.scene, n, setup.redistribution_events)
         stepper = entry_point(self.blocks.s.shape[0])
@@ -134,6 +135,12 @@ class Buffers:
         :data:`abb_gym.envs.kernel.STEP_ARRAYS`."""
         return (self.order, self.act, self.s, self.p, self.b, self.d, self.st, self.cfg, self.obs,
                 self.out, self.trace, self.active, *self.blocks.arrays())
+
+    def first_row_views(self) -> tuple:
+        """Views of the first row of the action, observation, output, status and state arrays:
+        the single environment's only row, which it reads and writes at every step (made
+        again after unpickling: a view would unpickle as a copy)."""
+        return self.act[0], self.observations[0], self.out[0], self.st[0], self.s[0]
 
     def kernel_args(self) -> tuple:
         """Arguments of :data:`abb_gym.envs.kernel.step_serial` / ``step_parallel``: the packed
@@ -162,11 +169,13 @@ class Buffers:
         state = self.__dict__.copy()
         state["_step"] = None  # compiled entry points do not pickle
         del state["args"]  # nor does the pack, which must hold the unpickled arrays
+        del state["first_row"]  # nor do views, which would unpickle as copies
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self.args = self.kernel_args()
+        self.first_row = self.first_row_views()
 
     def record_history(self, steps: int) -> None:
         """Record the first row's history from now on, ``steps`` control interval boundaries
