@@ -122,6 +122,10 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     monkeypatch.setattr(effects, "iter_speed_rows", effect_rows)
     monkeypatch.setattr(env_cost, "speed_rows", cost_rows)
     docs = tmp_path / "docs" / "performance.md"
+    docs.parent.mkdir()
+    begin, end = env_cost.COST_MARKERS
+    docs.write_text(f"# Performance\n\nWritten by hand.\n\n{begin}\nold figures\n{end}\n\n"
+                    f"## What sets the speed\n")
     assert main(["bench", "speed", "--quick", "--out", str(tmp_path), "--docs", str(docs)]) == 0
     total = rows_printed()
     # rows before each measurement: 2 run-up rows, 2 stepping rows, one per vector size, the
@@ -136,9 +140,16 @@ def test_bench_speed_prints_each_row_as_soon_as_it_is_measured(tmp_path, capsys,
     assert [kw.get("integrator", "rk4") for kw in vector_calls].count("etdrk4") == 1
     table = (tmp_path / "speed.md").read_text().splitlines()
     assert len(table) == 2 + total and table[2].startswith("| run-up generic ")
+    # the docs page: its generated section replaced (headings one level down), the rest kept
     page = docs.read_text()
-    assert page == (tmp_path / "performance.md").read_text()
-    assert "| per core " in page and "## Batch size" in page and "| 8 " in page
+    assert page.startswith("# Performance\n\nWritten by hand.\n\n" + begin)
+    assert page.endswith(end + "\n\n## What sets the speed\n") and "old figures" not in page
+    assert "| per core " in page and "\n### Batch size" in page and "| 8 " in page
+    own = (tmp_path / "performance.md").read_text()
+    assert own.startswith("# Performance") and "\n## Batch size" in own and "| per core " in own
+    docs.write_text("# Performance\n\nno markers\n")
+    assert main(["bench", "speed", "--quick", "--out", str(tmp_path), "--docs", str(docs)]) != 0
+    assert "performance.md has no <!-- bench-costs:begin" in capsys.readouterr().err
 
 
 def test_the_speed_table_warns_when_the_specialised_kernel_is_not_in_effect():

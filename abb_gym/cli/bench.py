@@ -26,7 +26,8 @@ def register(sub) -> None:
     spd.add_argument("--costs-only", action="store_true",
                      help="only the side-by-side CPU-time tables (benchmarks.env_cost)")
     spd.add_argument("--docs", default=None, metavar="PATH",
-                     help="also write the performance page there (docs/performance.md)")
+                     help="also write the generated section of this page (docs/performance.md: "
+                          "between its bench-costs markers; the rest stays as written)")
     spd.set_defaults(func=run_speed)
 
 
@@ -79,12 +80,11 @@ def run_speed(args) -> int:
         sys.stdout.flush()
     write_text(out / "speed.md", markdown_table(rows, COLUMNS) + "\n")
     print(f"wrote {out / 'speed.md'}")
-    from ..benchmarks.env_cost import performance_page
+    from ..benchmarks.env_cost import performance_page, write_docs_section
     page = performance_page(rows, COLUMNS)
     (out / "performance.md").write_text(page)
     print(f"wrote {out / 'performance.md'}")
     if args.docs:
-        Path(args.docs).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.docs).write_text(page)
-        print(f"wrote {args.docs}")
+        write_docs_section(args.docs, rows, COLUMNS)
+        print(f"wrote the generated section of {args.docs}")
     return 0
