@@ -27,14 +27,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from ..physics import variants
 
 __all__ = ["EpisodeParameter", "OptionUnit", "PARAMETERS", "BY_NAME", "RESET_OPTIONS",
-           "doc_table", "randomize_fields"]
+           "doc_table", "randomize_fields", "machine_changes"]
 
 PI = math.pi
 
@@ -178,6 +178,13 @@ PARAMETERS: tuple[EpisodeParameter, ...] = (
 )
 
 BY_NAME: dict[str, EpisodeParameter] = {par.name: par for par in PARAMETERS}
+
+
+def machine_changes(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The machine changes (:mod:`abb_gym.physics.variants`) among the episode ``values``
+    (parameter name -> value; those it lacks are left out)."""
+    return {par.name: values[par.name] for par in PARAMETERS
+            if par.machine and par.name in values}
 
 #: Every reset option: each parameter's name and its alternative units.
 RESET_OPTIONS: tuple[str, ...] = tuple(

@@ -60,7 +60,7 @@ from ..physics.scene import Scene
 from ..physics.steps import default_step, stiff_rates
 from . import redistribution
 from .config import PresetError
-from .episode_parameters import BY_NAME, PARAMETERS, RESET_OPTIONS
+from .episode_parameters import BY_NAME, PARAMETERS, RESET_OPTIONS, machine_changes
 from .layout import (N_ST, S_ACC, S_AOP, S_AREF, S_DTMAX, S_MARK, S_NKEY, S_NSEG,
                      S_PEN_RATE, S_PEN_TERM, S_UBEST, S_USCALE, S_XS, S_YS)
 
@@ -95,11 +95,6 @@ def reduce_angle(angle):
     return out
 
 
-def _machine(values: Mapping[str, Any]) -> dict[str, Any]:
-    """The machine changes (:mod:`abb_gym.physics.variants`) of episode ``values``."""
-    return {par.name: values[par.name] for par in PARAMETERS if par.machine}
-
-
 class Episode:
     """Parameters of one episode: every episode parameter by its name, in its unit
     (:data:`~abb_gym.envs.episode_parameters.PARAMETERS`), the integration step bound
@@ -132,7 +127,7 @@ class Episode:
     @cached_property
     def scene(self) -> Scene:
         """The episode as a Scene (built on first use)."""
-        return variants.variant_scene(self.nominal, **_machine(self.values))
+        return variants.variant_scene(self.nominal, **machine_changes(self.values))
 
     def as_info(self) -> dict[str, Any]:
         info: dict[str, Any] = {}
@@ -405,7 +400,7 @@ def _rk4_steps(setup: Any, p: np.ndarray, b: np.ndarray, values: Mapping[str, An
     over the rows of ``p``); raises ``error`` if the stiffest needs a step more than
     :data:`MAX_STIFFNESS` times shorter than its rotation alone does (module docstring)."""
     n = p.shape[0]
-    varied = variants.rates_vary(_machine_of(values))
+    varied = variants.rates_vary(machine_changes(values))
     rate = stiff_rates(p, b, setup.max_speed)
     step = np.broadcast_to(np.asarray(_steps(setup, p, "rk4", rate, varied), float), (n,))
     needed = np.broadcast_to(np.asarray(_steps(setup, p, "rk4", np.zeros(n) if varied else 0.0,
@@ -497,15 +492,9 @@ def check_preset_stiffness(setup: Any) -> None:
     corners = np.array(list(itertools.product(*axes)), dtype=float)
     values: dict[str, Any] = {par.name: corners[:, j] for j, par in enumerate(pars)}
     values["imbalance"] = np.full(len(corners), sc.imbalance)
-    p, b = variants.packed_variants(sc, len(corners), **_machine_of(values))
+    p, b = variants.packed_variants(sc, len(corners), **machine_changes(values))
     _rk4_steps(setup, p, b, values,
                f"environment preset {cfg.name!r} (its randomize ranges allow it)", PresetError)
-
-
-def _machine_of(values: Mapping[str, Any]) -> dict[str, Any]:
-    """The machine changes of the (possibly partial) episode ``values``."""
-    return {par.name: values[par.name] for par in PARAMETERS
-            if par.machine and par.name in values}
 
 
 @dataclass
@@ -544,7 +533,7 @@ def prepare(setup: Any, table: EpisodeTable, rows, values: Mapping[str, Any]) ->
         vals[par.name] = v.reshape(n, nb) if par.per_ball else np.broadcast_to(v, (n,)).copy()
     key = (np.zeros(n, dtype=np.int64) if values.get(NOISE_KEY) is None
            else np.asarray(values[NOISE_KEY], np.int64))
-    machine = _machine(vals)
+    machine = machine_changes(vals)
     p, b = variants.packed_variants(sc, n, **machine)
     step = setup.config.integration_step
     if step is None:

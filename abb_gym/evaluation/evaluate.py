@@ -27,7 +27,7 @@ import numpy as np
 
 from ..physics.rotor import spinning_inertia
 from ..envs import tasks
-from ..envs.episode_parameters import PARAMETERS
+from ..envs.episode_parameters import machine_changes
 from ..progress import ProgressBar
 from . import metrics as mt
 from .registry import Policy, resolve
@@ -186,7 +186,7 @@ def _hold(native: Any, j: int, hist: dict, unit: float, hold: float) -> dict[str
     setup = native.setup
     ep = native.episode(j)
     scene = variants.variant_scene(ep.nominal, **{
-        **{par.name: ep.values[par.name] for par in PARAMETERS if par.machine},
+        **machine_changes(ep.values),
         "imbalance": float(native.imbalances[j])})
     xs, ys = ep.static_deflection
     tolerance = mt.balance_tolerance(scene, setup.operating_speed, setup.config.balance_tolerance)
