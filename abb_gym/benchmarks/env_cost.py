@@ -311,7 +311,7 @@ def batch_table(sizes=BATCH_SIZES, rounds: int = 15, busy: bool = False) -> list
     Both cases step one environment (its arrays at the same addresses): two environments of
     the same seed and actions ran the same serial code at 64 sub-environments 1.33x apart.
     Up to 128 sub-environments (one block) both cases run the same serial kernel, so a ratio
-    there away from 1 is the method's noise; 15 rounds, not 7, narrow it."""
+    there away from 1 is the method's noise, which 15 rounds narrow."""
     if busy:
         with busy_neighbour():
             return batch_table(sizes, rounds)

@@ -122,12 +122,11 @@ class Buffers:
         self.first_row = self.first_row_views()
         #: the current episode of every row (:mod:`abb_gym.envs.episodes`)
         self.table = EpisodeTable(setup.scene, n, setup.redistribution_events)
-        stepper = entry_point(self.blocks.s.shape[0])
         self.kernel = resolve_kernel(kernel, self.blocks.lanes, cached_ok=True)
         self._step = None
         if self.kernel == "cached":
             # "auto" on a few lanes: the specialised kernel if it needs no compiling
-            self._step = stepper.cached_entry(*self.args)
+            self._step = entry_point(self.blocks.s.shape[0]).cached_entry(*self.args)
             self.kernel = "generic" if self._step is None else "specialised"
 
     def step_arrays(self) -> tuple:

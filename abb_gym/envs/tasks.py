@@ -31,8 +31,9 @@ class Task:
     ``single_class``/``vector_class``: ``"module:Class"`` of the environments (default: the
     generic :class:`~abb_gym.envs.base.BalancerEnv` / :class:`~abb_gym.envs.vector.
     BalancerVectorEnv`, bound to this task by its id; named as text, so that this module
-    imports no environment and :func:`load_named` is the one way to a task's class).  ``settings``: preset fields the task fixes
-    (merged over the preset and the keyword overrides).  ``registered_steps``: the registered
+    imports no environment and :func:`load_named` is the one way to a task's class).
+    ``settings``: preset fields the task fixes (merged over the preset and the keyword
+    overrides).  ``registered_steps``: the registered
     ``max_episode_steps`` (None: ``gym.make`` wraps the environment in a ``TimeLimit`` of its
     own episode length, which depends on the scene and preset).  ``open_loop``: the open-loop
     speed-profile baselines (``baseline:*``, the tuner, ``replay:``) drive it; ``baselines_on``:
