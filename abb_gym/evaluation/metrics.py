@@ -39,6 +39,8 @@ metric                    unit     definition
 ``residual_after_hold``   W_r/e    time-average vibration over the last ``settle_time`` of a
                                    :data:`HOLD_TIME` hold at the operating speed after the run
                                    (NaN if the run never settled)
+``redistributions``       count    redistributions of the laundry in the episode (0 without
+                                   ``redistribution.enabled``): the retries a drive spent
 ========================  =======  ===============================================================
 
 **Balancing, not luck.**  The residual over the settling window is measured right after the
@@ -76,7 +78,7 @@ METRICS = {"run_up_time": "s", "first_at_speed": "s", "at_speed": "share",
            "residual_vibration": "W_r/e", "peak_whirl": "W_r/e", "peak_speed": "w_op",
            "time_above_band": "s", "ball_settling_time": "s", "residual_imbalance": "U0",
            "balanced": "share", "nonsynchronous_whirl": "share", "drive_energy": "J",
-           "time_to_balance": "s", "residual_after_hold": "W_r/e"}
+           "time_to_balance": "s", "residual_after_hold": "W_r/e", "redistributions": "count"}
 ANGLE_TOL = math.radians(2.0)
 #: hold at the operating speed after an episode [s] (the issue's 10-20 s): on yoshida_odd the
 #: residual of a tuned run-up falls from 0.45 W_r/e one second after reaching speed to 0.17
@@ -231,6 +233,7 @@ def rollout_metrics(setup, final_info: Mapping[str, Any], history: Mapping[str, 
     out["balanced"] = bool(final_info["balanced"])
     out["drive_energy"] = drive_energy(history["t"], history["rotor_speed"], torque)
     out.update(hold or {"time_to_balance": math.nan, "residual_after_hold": math.nan})
+    out["redistributions"] = int(final_info.get("redistributions", 0))
     return out
 
 
