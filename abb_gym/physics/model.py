@@ -436,6 +436,14 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
 
 
 @njit(cache=True, inline="always")
+def _pair_may_touch(s, p, l, lo, hi):
+    """Whether balls ``lo`` and ``hi`` of lane ``l`` may touch: contact on and the balls
+    within the lane's reach angle (:func:`abb_gym.physics.contact.may_touch`)."""
+    d = _contact.wrap_angle(s[3 + hi, l] - s[3 + lo, l])
+    return p[P_KC, l] != 0.0 and _contact.may_touch(d, p[P_REACH, l])
+
+
+@njit(cache=True, inline="always")
 def _contacts(s, p, b, ds, work, nb, nq, L):
     """Pass (1) of :func:`accelerations_block`: each ball's generalised contact force [N m]
     into ``ds[3 + i]`` and its outward radial contact force [N] into ``ds[nq + 3 + i]``, every
@@ -448,8 +456,13 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     order along the race therefore never changes, and a ball can only touch the next ball
     ahead and the next behind: n pairs instead of n (n - 1) / 2 (12 instead of 66 for the
     washer).  Here the neighbours are the balls of adjacent index (ball n - 1 next to ball 0),
-    each pair computed in lane loops without branches (:func:`~abb_gym.physics.contact.
-    pair_force`), which vectorise but for the sine and cosine of the pair geometry.
+    each pair in two lane loops: one without branches (it vectorises) puts every lane's pair
+    at rest and asks whether the two balls are within the reach angle
+    (:func:`~abb_gym.physics.contact.may_touch`), and only where they are, and only if any
+    lane's are, a second one computes the pair force (:func:`~abb_gym.physics.contact.
+    pair_force`, whose sine and cosine are C library calls: asked for every lane, they cost
+    the spread balls of a ring about as much as the rest of the right-hand side).  A pair
+    beyond the reach angle has no force, so the results are the same bits.
 
     **When it does not apply.**  Index order need not be race order (a scene's or an episode's
     initial angles in any order), and a penalty contact lets a ball through a neighbour when
@@ -477,14 +490,23 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     for k in range(pairs):
         lo = 0 if k == nb - 1 else k
         hi = nb - 1 if k == nb - 1 else k + 1
+        # every lane's pair at rest (a loop that vectorises), then the pair force of the lanes
+        # where the two balls may touch (a scalar loop: the force's sine and cosine)
+        near = 0
         for l in range(L):
-            _, q, radial = _contact.pair_force(
-                s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l], p[P_R, l],
-                b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l], b[hi, B_MEFF, l],
-                p[P_KC, l], p[P_ZC, l])
-            on = p[P_KC, l] != 0.0
-            work[k, W_PQ, l] = q if on else 0.0
-            work[k, W_PN, l] = radial if on else 0.0
+            work[k, W_PQ, l] = 0.0
+            work[k, W_PN, l] = 0.0
+            near += 1 if _pair_may_touch(s, p, l, lo, hi) else 0
+        if near == 0:
+            continue
+        for l in range(L):
+            if _pair_may_touch(s, p, l, lo, hi):
+                _, q, radial = _contact.pair_force(
+                    s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l],
+                    p[P_R, l], b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l],
+                    b[hi, B_MEFF, l], p[P_KC, l], p[P_ZC, l])
+                work[k, W_PQ, l] = q
+                work[k, W_PN, l] = radial
     for i in range(nb):
         # ball i is the higher index of pair i - 1 (+q) and the lower of pair i (-q); ball 0
         # the lower of pair n - 1 too, ball n - 1 its higher (the all-pairs loop's order)
