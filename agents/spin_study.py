@@ -29,8 +29,10 @@ ENV = "abb_gym/SpinRedistribute-v0"
 AGENT = "spin_redistribute_washer"
 BASELINES = ("baseline:knots", "baseline:retry_at_spin", "baseline:redistribute_low",
              "baseline:laundry_oracle")
+#: the table's columns: ``at_speed`` below 1 shows episodes that never completed their spin
+#: (a time limit or a cabinet hit), ``redistributions`` the retries spent
 HEADLINE = ("return", "residual_vibration", "residual_after_hold", "run_up_time",
-            "time_to_balance", "peak_whirl")
+            "time_to_balance", "at_speed", "redistributions", "peak_whirl")
 
 
 def build_parser() -> argparse.ArgumentParser:

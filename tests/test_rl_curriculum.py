@@ -78,3 +78,57 @@ def test_the_training_ranges_follow_the_curriculum_and_come_back():
     assert len(seen) == 2
     assert seen[1] == pytest.approx((1 - 0.5 * (1 - full[0]), 1 + 0.5 * (full[1] - 1)))
     assert setup.config.randomize.critical_speed_scale == full  # the preset's again
+
+
+@pytest.mark.parametrize("value, match", [
+    ({"share": 0.3}, r"field 'oversample.randomize' is missing"),
+    ({"share": 1.0, "randomize": {"imbalance_ratio": [1.0, 1.6]}},
+     r"oversample: field 'share' must be in \(0, 1\)"),
+    ({"randomize": []}, r"'oversample.randomize' must be a non-empty mapping"),
+    ({"randomize": {"imbalance_ratio": [1.0, 1.6]}, "every": 2}, r"unknown field\(s\) \['every'\]"),
+    ([0.3], r"'oversample' must be a mapping"),
+])
+def test_bad_oversample_settings_name_the_field(value, match):
+    entry = {"n_envs": 2, "policy": "BoundedMlpPolicy",
+             "env_kwargs": {"scene": "yoshida_odd", "preset": "varied"}}
+    with pytest.raises(TrainConfigError, match=match):
+        TrainConfig.from_mapping(SPEED, entry, "x.yml", {"oversample": value})
+
+
+def test_oversampled_rollouts_draw_from_their_ranges_and_come_back():
+    """About ``share`` of the rollouts draw their episodes from the oversampled ranges, the
+    rest from the preset's, by a generator of the training seed; a range the preset would
+    refuse is refused by name before any step; the preset's ranges come back at the end."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    from abb_gym.envs.config import PresetError
+    from abb_gym.rl.curriculum import OversampleCallback
+
+    venv = make_sb3_env(SPEED, 2, {"scene": "yoshida_odd", "preset": "varied",
+                                   "control_interval": 0.05})
+    setup = venv.unwrapped.setup
+    full = setup.config.randomize.imbalance_ratio
+    seen = []
+
+    class Spy(BaseCallback):
+        def _on_rollout_start(self):
+            seen.append(setup.config.randomize.imbalance_ratio)
+
+        def _on_step(self):
+            return True
+
+    def learn(settings, seed):
+        seen.clear()
+        model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0)
+        model.learn(32 * 40, callback=CallbackList([OversampleCallback(settings, seed), Spy()]))
+        return list(seen)
+
+    settings = {"share": 0.3, "randomize": {"imbalance_ratio": [1.0, 1.2]}}
+    first = learn(settings, 7)
+    assert len(first) == 40 and set(first) == {full, (1.0, 1.2)}
+    assert 4 <= first.count((1.0, 1.2)) <= 20  # 0.3 x 40 = 12 expected
+    assert learn(settings, 7) == first  # the same seed, the same rollouts
+    assert setup.config.randomize.imbalance_ratio == full  # the preset's again
+    with pytest.raises(PresetError, match="imbalance_ratio"):
+        learn({"share": 0.3, "randomize": {"imbalance_ratio": [1.2, 1.0]}}, 7)

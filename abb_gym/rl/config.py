@@ -33,6 +33,7 @@ The entry under the environment id holds what both read; ``_abb_gym`` holds the 
       tensorboard_log: tb           # TensorBoard event files (as --tensorboard-log DIR)
       shaping: {observation: sync_amplitude, weight: 10.0}   # potential-based, training only
       curriculum: {fields: [critical_speed_scale], start: 0.2, full_at: 0.5}  # narrow first
+      oversample: {share: 0.3, randomize: {imbalance_ratio: [1.0, 1.6]}}  # hard cases more often
       algo: sac                     # sac or tqc (policy MlpPolicy); default from the policy
       init_from: {folder: runs/x, model: best}   # start from that run's weights (fine-tune)
       imitate: {policy: "baseline:redistribute_low", episodes: 256}   # clone, then PPO
@@ -118,9 +119,10 @@ ABB_GYM_SECTION = "_abb_gym"
 #: the keys of the ``_abb_gym`` section: settings of ``abb-gym train`` that rl_zoo3 does not know
 ABB_GYM_KEYS = ("eval_env_kwargs", "eval_freq", "eval_episodes", "eval_seed",
                 "checkpoint_freq", "bootstrap_truncated", "tensorboard_log", "shaping",
-                "curriculum", "algo", "init_from", "imitate")
+                "curriculum", "oversample", "algo", "init_from", "imitate")
 #: of those, the ones only the ``_abb_gym`` section may hold
-SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "algo", "init_from", "imitate")
+SECTION_ONLY_KEYS = ("tensorboard_log", "shaping", "curriculum", "oversample", "algo", "init_from",
+                     "imitate")
 #: a number or ``lin_<start>`` (the keys rl_zoo3 turns into schedules for PPO)
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 
@@ -322,6 +324,10 @@ class TrainConfig:
                                                     "similar machines to the preset's "
                                                     "{fields, start, full_at} "
                                                     "(abb_gym.rl.curriculum; null: none)")
+    oversample: dict[str, Any] | None = declare(None, kind="any",
+                                                doc="_abb_gym: a share of the rollouts drawn "
+                                                    "from other ranges, {share, randomize} "
+                                                    "(abb_gym.rl.curriculum; null: none)")
     algo: str = declare("ppo", kind="choice", choices=tuple(ALGORITHMS),
                         doc="_abb_gym: the algorithm, rl_zoo3's --algo name (default: ppo, "
                             "ppo_lstm for a recurrent policy; sac or tqc only by this key)")
@@ -405,6 +411,9 @@ class TrainConfig:
             elif key == "curriculum":
                 from .curriculum import curriculum_settings
                 v = curriculum_settings(v, where, TrainConfigError)
+            elif key == "oversample":
+                from .curriculum import oversample_settings
+                v = oversample_settings(v, where, TrainConfigError)
             elif key == "shaping":
                 from .shaping import shaping_settings
                 v = shaping_settings(v, where, TrainConfigError)

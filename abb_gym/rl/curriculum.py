@@ -28,7 +28,8 @@ from ..configuration import build_section, declare
 from ..envs.episode_parameters import PARAMETERS
 
 __all__ = ["CURRICULUM_FIELDS", "CurriculumSettings", "curriculum_settings", "fraction",
-           "narrowed", "CurriculumCallback"]
+           "narrowed", "CurriculumCallback", "OversampleSettings", "oversample_settings",
+           "OversampleCallback"]
 
 #: the ``randomize`` fields a curriculum may narrow: the episode parameters that are factors
 #: on a scene value, nominal 1 (:mod:`abb_gym.envs.episode_parameters`)
@@ -135,3 +136,84 @@ def _callback_class():
             setup.config = dataclasses.replace(setup.config, randomize=self.full)
 
     return _Curriculum
+
+
+# --------------------------------------------------------------------------- oversampling
+@dataclass(frozen=True)
+class OversampleSettings:
+    """Settings of hard-case oversampling (the ``_abb_gym.oversample`` mapping)."""
+
+    share: float = declare(0.25, gt=0.0, lt=1.0,
+                           doc="share of the rollouts whose new episodes draw from "
+                               "``randomize``")
+    randomize: Any = declare(None, kind="any",
+                             doc="randomize ranges of those episodes, over the preset's "
+                                 "(e.g. {imbalance_ratio: [1.0, 1.6]})")
+
+
+def oversample_settings(value: Any, where: str, error: type[ValueError]
+                        ) -> dict[str, Any] | None:
+    """The validated ``oversample`` mapping (None: none); ``error`` names the field.  The
+    ranges themselves are checked as a preset's when training sets up (before any step)."""
+    settings = build_section(OversampleSettings, value, "oversample", where, error,
+                             "a mapping {share: S, randomize: {FIELD: [LO, HI]}}",
+                             required={"randomize": "the ranges of the oversampled episodes"})
+    if settings is None:
+        return None
+    if not isinstance(settings.randomize, Mapping) or not settings.randomize:
+        raise error(f"{where}: field 'oversample.randomize' must be a non-empty mapping of "
+                    f"randomize fields to ranges (got {settings.randomize!r})")
+    return {"share": float(settings.share), "randomize": dict(settings.randomize)}
+
+
+def OversampleCallback(settings: Mapping[str, Any], seed: int | None, verbose: int = 0):
+    """The SB3 callback that draws a share of the rollouts from other ranges (built lazily:
+    SB3 is imported on first use).  ``settings``: :func:`oversample_settings`' mapping.
+
+    Why: a rare situation that decides an episode's return (on SpinRedistribute, a drive
+    that has spent all its redistributions on loads beyond the balls' capacity) is met a few
+    times in a million steps of the training preset, and a network fed its observations
+    extrapolates there.  At the start of each rollout, with probability ``share`` (from a
+    generator seeded by the training seed), the episodes that begin during it draw from the
+    preset's ranges with ``randomize`` over them; the rest from the preset's own.  The
+    held-out evaluations always use their own preset."""
+    return _oversample_class()(settings, seed, verbose)
+
+
+def _oversample_class():
+    import numpy as np
+
+    BaseCallback = _callback_base()
+
+    class _Oversample(BaseCallback):
+        def __init__(self, settings, seed, verbose):
+            super().__init__(verbose)
+            self.settings = dict(settings)
+            self.rng = np.random.default_rng(None if seed is None else [int(seed), 46])
+            self.full = self.hard = None
+
+        def _setup(self):
+            return self.training_env.unwrapped.unwrapped.setup
+
+        def _on_training_start(self) -> None:
+            from ..envs.config import load_preset
+            setup = self._setup()
+            self.full = setup.config.randomize
+            over = {**setup.config.to_dict()["randomize"], **self.settings["randomize"]}
+            self.hard = load_preset(setup.config, randomize=over).randomize
+
+        def _on_rollout_start(self) -> None:
+            hard = bool(self.rng.random() < self.settings["share"])
+            setup = self._setup()
+            setup.config = dataclasses.replace(setup.config,
+                                               randomize=self.hard if hard else self.full)
+            self.logger.record("oversample/hard", float(hard))
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_training_end(self) -> None:
+            setup = self._setup()
+            setup.config = dataclasses.replace(setup.config, randomize=self.full)
+
+    return _Oversample

@@ -467,6 +467,9 @@ def train(cfg: TrainConfig, *, seed: int = 0, run_dir: str | os.PathLike | None 
     if cfg.curriculum is not None:
         from .curriculum import CurriculumCallback
         callbacks.append(CurriculumCallback(cfg.curriculum, cfg.n_timesteps))
+    if cfg.oversample is not None:
+        from .curriculum import OversampleCallback
+        callbacks.append(OversampleCallback(cfg.oversample, seed))
     if cfg.checkpoint_freq > 0:
         callbacks.append(Checkpoints(max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                      run_dir / "checkpoints", meta, cfg.algo))
