@@ -51,12 +51,12 @@ def _lanes(scene, angles, speeds):
     return (s, np.repeat(p1[:, None], n, 1), np.repeat(b1[:, :, None], n, 2))
 
 
-def _clustered(scene, rng, n_lanes, squeeze):
+def _clustered(scene, rng, n_lanes, squeeze, widest=1.3):
     """Angles in race order, each gap the touching distance times a factor drawn from
-    [1 - squeeze, 1.3] (overlaps up to ``squeeze`` of the reach), the cluster anywhere."""
+    [1 - squeeze, widest] (overlaps up to ``squeeze`` of the reach), the cluster anywhere."""
     nb = scene.ball_count
     reach = 2.0 * math.asin(scene.ball_radius[0] / scene.race_radius)
-    gaps = reach * rng.uniform(1.0 - squeeze, 1.3, (n_lanes, nb))
+    gaps = reach * rng.uniform(1.0 - squeeze, widest, (n_lanes, nb))
     angles = np.cumsum(gaps, axis=1) + rng.uniform(-20.0, 20.0, (n_lanes, 1))
     return angles, rng.normal(0.0, 5.0, (n_lanes, nb))
 
@@ -75,6 +75,64 @@ def test_the_neighbour_list_gives_the_bits_of_every_pair(name, count):
     assert ring.all()  # every lane took the neighbour list
     assert np.count_nonzero(q_all) > 0.3 * q_all.size  # and most balls touch
     assert np.array_equal(q, q_all) and np.array_equal(n, n_all)
+
+
+@pytest.mark.parametrize("name", ["yoshida_odd5", "washer"])
+def test_spread_lanes_skip_the_pair_force_and_give_the_bits_of_every_pair(name):
+    """The kernel asks for a pair's force only in lanes where the two balls are within the
+    reach angle (and skips a pair that no lane has within it): lanes of spread balls, of
+    single touching pairs and of pairs a rounding error either side of the reach angle give
+    the bits of every pair."""
+    scene = load_scene(name)
+    nb = scene.ball_count
+    rng = np.random.default_rng(11)
+    angles, speeds = _clustered(scene, rng, 300, squeeze=0.3, widest=3.0)
+    # a third of the lanes spread over the whole race (no pair within reach in some of the
+    # blocks' pairs), a third with pair (1, 2) at the reach angle less or more a few ulp
+    angles[:100] = np.linspace(0.0, 2 * np.pi, nb, endpoint=False) + rng.uniform(
+        -0.1, 0.1, (100, nb))
+    reach_angle = contact.neighbour_reach_angle(scene.ball_radius, scene.race_radius)
+    angles[100:200, 2] = angles[100:200, 1] + reach_angle * (1.0 + rng.uniform(-4e-16, 4e-16,
+                                                                               100))
+    s, p, b = _lanes(scene, angles, speeds)
+    q, n, _ = _kernel_contacts(s, p, b, nb)
+    q_all, n_all = _all_pairs(s, p, b, nb)
+    assert np.array_equal(q, q_all) and np.array_equal(n, n_all)
+    assert np.count_nonzero(q_all[:, 200:]) > 0.1 * q_all[:, 200:].size  # some balls touch
+    # all spread: the force pass is skipped for every pair, every force is 0
+    q, n, _ = _kernel_contacts(s[:, :100].copy(), p[:, :100].copy(), b[:, :, :100].copy(), nb)
+    assert not q.any() and not n.any()
+
+
+@pytest.mark.parametrize("ratio", [1e-4, 0.01, 0.3, 0.8, 0.84, 0.9, 1.0])
+def test_no_pair_beyond_the_reach_angle_can_touch(ratio):
+    """:func:`contact.may_touch` rules a pair out only where its force is zero: balls of
+    radius up to ``ratio`` times the track radius, pairs at the reach angle less or more a
+    relative 1e-5, approaching at any speed (the damper cannot make a force without
+    penetration)."""
+    rng = np.random.default_rng(int(ratio * 1e4))
+    big_r = 0.2
+    radii = big_r * ratio * rng.uniform(0.5, 1.0, 3)
+    radii[0] = big_r * ratio
+    reach_angle = contact.neighbour_reach_angle(radii, big_r)
+    d = reach_angle * (1.0 + rng.uniform(-1e-5, 1e-5, 4000))
+    d = np.concatenate([d, rng.uniform(-math.pi, math.pi, 4000)])
+    ruled_out = 0
+    for k, dk in enumerate(d):
+        i, j = k % 3, (k + 1 + k // 3 % 2) % 3
+        phi_i = rng.uniform(-30.0, 30.0)
+        phi_j = phi_i + dk
+        # (the difference as the kernel forms it)
+        if contact.may_touch.py_func(contact.wrap_angle.py_func(phi_j - phi_i), reach_angle):
+            continue
+        ruled_out += 1
+        on, q, radial = contact.pair_force.py_func(phi_i, phi_j, 50.0, -50.0, big_r,
+                                                   radii[i] + radii[j], 1e-3, 2e-3, 1e4, 2.0)
+        assert not on and q == 0.0 and radial == 0.0
+    if reach_angle < contact.GUARD_LIMIT:
+        assert ruled_out > 1000
+    else:  # balls too large for the guard's margin: it rules nothing out
+        assert ruled_out == 0
 
 
 def test_lanes_out_of_race_order_or_squeezed_take_every_pair():

@@ -307,7 +307,8 @@ def _run_case(name, motor):
     return scene, p, b, s0, t_out, seg_t, seg_d, h
 
 
-ALL_BITS = mdl.SPEC_EXT | mdl.SPEC_ECC | mdl.SPEC_ROLL
+ALL_BITS = (mdl.SPEC_EXT | mdl.SPEC_ECC | mdl.SPEC_ROLL | mdl.SPEC_CONTACT | mdl.SPEC_DRAG
+            | mdl.SPEC_FRICTION | mdl.SPEC_GRAVITY)
 
 
 @pytest.mark.parametrize("name", abb_gym.list_scenes())

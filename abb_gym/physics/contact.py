@@ -112,6 +112,23 @@ def neighbour_reach_angle(radii, big_r: float) -> float:
     return min(math.pi, 2.0 * math.asin(half) * (1.0 + 1e-6))
 
 
+#: largest reach angle [rad] (:func:`neighbour_reach_angle`) for which :func:`may_touch` rules
+#: pairs out: balls smaller than sin(1) = 0.84 of the track radius.  Below it the angle's
+#: relative widening of 1e-6 keeps the chord of a pair beyond the angle longer than its reach
+#: by at least 1e-6 cos(1) / 2 relative, far above the rounding of the pair's geometry.
+GUARD_LIMIT = 2.0
+
+
+@njit(cache=True, inline="always")
+def may_touch(d, reach_angle):
+    """Whether a pair of balls ``d`` [rad] apart (wrapped, as :func:`pair_geometry` wraps
+    it) may touch, for the ``reach_angle`` of :func:`neighbour_reach_angle`: False only where
+    :func:`pair_force` is certain to find no penetration, so that it need not be asked there
+    (its sine and cosine are C library calls, which a lane loop cannot vectorise).  Without
+    branches."""
+    return abs(d) <= reach_angle or reach_angle >= GUARD_LIMIT
+
+
 @njit(cache=True, inline="always")
 def mod_turn(a):
     """``a`` [rad] reduced to [0, 2 pi) (floor, which vectorises)."""

@@ -157,6 +157,16 @@ SPEC_ENVELOPE = 16  # a motor with a torque-speed envelope
 # not an effect but a layout: every block has one lane (a single environment), so that the
 # lane count is a compile-time constant too (lanes_of)
 SPEC_ONE_LANE = 32
+# which of the extended effects (under SPEC_EXT) exist: a kernel compiled without one has none
+# of its code.  Each term is also guarded by its lane's parameter (p[P_KC] != 0, ...), a
+# branch that LLVM turned into a select: it then evaluated the fluid drag's log10 and pow and
+# the friction law's exp and tanh (C library calls, which also kept the lane loops scalar) in
+# every lane of every kernel with any extended effect, and threw the results away.  With the
+# bits, a lane computes what it did before, so the results are the same bits.
+SPEC_CONTACT = 64   # ball-ball contact (P_KC != 0)
+SPEC_DRAG = 128     # a nonlinear fluid drag law (P_DLAW != 0)
+SPEC_FRICTION = 256  # race friction (P_FRIC != 0)
+SPEC_GRAVITY = 512  # gravity (P_GRAV != 0)
 
 
 def pack_parameters(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -426,6 +436,14 @@ def _ball_terms(th, w, w2, ph, dph, ball, geometry, extended_inputs, flags):
 
 
 @njit(cache=True, inline="always")
+def _pair_may_touch(s, p, l, lo, hi):
+    """Whether balls ``lo`` and ``hi`` of lane ``l`` may touch: contact on and the balls
+    within the lane's reach angle (:func:`abb_gym.physics.contact.may_touch`)."""
+    d = _contact.wrap_angle(s[3 + hi, l] - s[3 + lo, l])
+    return p[P_KC, l] != 0.0 and _contact.may_touch(d, p[P_REACH, l])
+
+
+@njit(cache=True, inline="always")
 def _contacts(s, p, b, ds, work, nb, nq, L):
     """Pass (1) of :func:`accelerations_block`: each ball's generalised contact force [N m]
     into ``ds[3 + i]`` and its outward radial contact force [N] into ``ds[nq + 3 + i]``, every
@@ -438,8 +456,13 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     order along the race therefore never changes, and a ball can only touch the next ball
     ahead and the next behind: n pairs instead of n (n - 1) / 2 (12 instead of 66 for the
     washer).  Here the neighbours are the balls of adjacent index (ball n - 1 next to ball 0),
-    each pair computed in lane loops without branches (:func:`~abb_gym.physics.contact.
-    pair_force`), which vectorise but for the sine and cosine of the pair geometry.
+    each pair in two lane loops: one without branches (it vectorises) puts every lane's pair
+    at rest and asks whether the two balls are within the reach angle
+    (:func:`~abb_gym.physics.contact.may_touch`), and only where they are, and only if any
+    lane's are, a second one computes the pair force (:func:`~abb_gym.physics.contact.
+    pair_force`, whose sine and cosine are C library calls: asked for every lane, they cost
+    the spread balls of a ring about as much as the rest of the right-hand side).  A pair
+    beyond the reach angle has no force, so the results are the same bits.
 
     **When it does not apply.**  Index order need not be race order (a scene's or an episode's
     initial angles in any order), and a penalty contact lets a ball through a neighbour when
@@ -467,14 +490,23 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     for k in range(pairs):
         lo = 0 if k == nb - 1 else k
         hi = nb - 1 if k == nb - 1 else k + 1
+        # every lane's pair at rest (a loop that vectorises), then the pair force of the lanes
+        # where the two balls may touch (a scalar loop: the force's sine and cosine)
+        near = 0
         for l in range(L):
-            _, q, radial = _contact.pair_force(
-                s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l], p[P_R, l],
-                b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l], b[hi, B_MEFF, l],
-                p[P_KC, l], p[P_ZC, l])
-            on = p[P_KC, l] != 0.0
-            work[k, W_PQ, l] = q if on else 0.0
-            work[k, W_PN, l] = radial if on else 0.0
+            work[k, W_PQ, l] = 0.0
+            work[k, W_PN, l] = 0.0
+            near += 1 if _pair_may_touch(s, p, l, lo, hi) else 0
+        if near == 0:
+            continue
+        for l in range(L):
+            if _pair_may_touch(s, p, l, lo, hi):
+                _, q, radial = _contact.pair_force(
+                    s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l],
+                    p[P_R, l], b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l],
+                    b[hi, B_MEFF, l], p[P_KC, l], p[P_ZC, l])
+                work[k, W_PQ, l] = q
+                work[k, W_PN, l] = radial
     for i in range(nb):
         # ball i is the higher index of pair i - 1 (+q) and the lower of pair i (-q); ball 0
         # the lower of pair n - 1 too, ball n - 1 its higher (the all-pairs loop's order)
@@ -538,10 +570,10 @@ def _lane_ball_terms(t, s, p, b, d, ds, i, l, nq, spec):
     stg = ds[0, l] if ecc else el.like(x, 0.0)
     ctg = ds[1, l] if ecc else el.like(x, 0.0)
     big_r = p[P_R, l]
-    grav = ext and p[P_GRAV, l] != 0.0
-    touch = ext and p[P_KC, l] != 0.0
-    fric = ext and p[P_FRIC, l] != 0.0
-    dlaw = p[P_DLAW, l] if ext else el.like(x, 0.0)
+    grav = ext and (spec & SPEC_GRAVITY) != 0 and p[P_GRAV, l] != 0.0
+    touch = ext and (spec & SPEC_CONTACT) != 0 and p[P_KC, l] != 0.0
+    fric = ext and (spec & SPEC_FRICTION) != 0 and p[P_FRIC, l] != 0.0
+    dlaw = p[P_DLAW, l] if ext and (spec & SPEC_DRAG) != 0 else el.like(x, 0.0)
     geometry = (big_r, p[P_UREG, l], p[P_E, l], p[P_GAM, l], stg, ctg, p[P_GX, l],
                 p[P_GY, l])
     law = (dlaw, p[P_CD0, l], p[P_CD1, l], p[P_CD2, l], p[P_CD3, l], p[P_CDINF, l],
@@ -640,13 +672,14 @@ def _add_ball(acc, terms, inv, motor):
 
 
 @njit(cache=True, inline="always")
-def _solve_rotor(acc, lane, p, l, ext, motor):
+def _solve_rotor(acc, lane, p, l, gravity, motor):
     """(x'', y'', th'') of lane ``l`` from its sums ``acc`` and ``lane`` (:func:`_rotor_start`):
-    gravity's rotor terms, the 2x2 (prescribed spin) or 3x3 (motor) system."""
+    gravity's rotor terms (where ``gravity``, the kernel's gravity bit, and the lane's
+    parameter say so), the 2x2 (prescribed spin) or 3x3 (motor) system."""
     (sx, cy, jt, fx, fy, fth, d00, d01, d10, d11, d02, d12, d20, d21, d22, g0, g1, g2) = acc
     alpha = lane[2]
     total = p[P_MASS, l]
-    if ext and p[P_GRAV, l] != 0.0:
+    if gravity and p[P_GRAV, l] != 0.0:
         gx = p[P_GX, l]
         gy = p[P_GY, l]
         fx += total * gx
@@ -742,12 +775,13 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     L = lanes_of(s, spec)
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
+    gravity = ext and (spec & SPEC_GRAVITY) != 0
     ecc = (spec & SPEC_ECC) != 0
     motor = (spec & SPEC_MOTOR) != 0
     envelope = (spec & SPEC_ENVELOPE) != 0
     # pair forces first, into the balls' rows of ds: the contact's radial part loads the race
     # (friction, rolling); and the race's sin and cos of th + gam into ds rows 0 and 1
-    if ext:
+    if ext and (spec & SPEC_CONTACT) != 0:
         _contacts(s, p, b, ds, work, nb, nq, L)
     if ecc:
         for l in range(L):
@@ -765,7 +799,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
                 work[i, W_BY, l] = terms[11]
                 work[i, W_BTH, l] = terms[12]
                 acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
-            ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+            ax, ay, ath = _solve_rotor(acc, lane, p, l, gravity, motor)
             _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
         return
     for i in range(nb):
@@ -781,7 +815,7 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
                      work[i, W_FY, l], work[i, W_FTH, l], work[i, W_FI, l], work[i, W_BX, l],
                      work[i, W_BY, l], work[i, W_BTH, l])
             acc = _add_ball(acc, terms, b[i, B_INV, l], motor)
-        ax, ay, ath = _solve_rotor(acc, lane, p, l, ext, motor)
+        ax, ay, ath = _solve_rotor(acc, lane, p, l, gravity, motor)
         _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
 
 
@@ -794,6 +828,10 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
     spec = 0
     if np.any(p[..., P_EXT] != 0.0):
         spec |= SPEC_EXT
+    for column, bit in ((P_KC, SPEC_CONTACT), (P_DLAW, SPEC_DRAG), (P_FRIC, SPEC_FRICTION),
+                        (P_GRAV, SPEC_GRAVITY)):
+        if np.any(p[..., column] != 0.0):
+            spec |= bit
     if np.any(p[..., P_ECC] != 0.0):
         spec |= SPEC_ECC
     if np.any(p[..., P_ROLL] != 0.0):
@@ -805,9 +843,11 @@ def spec_of(p: np.ndarray, d: np.ndarray) -> int:
     return spec
 
 
-_SPEC_WORDS = ((SPEC_EXT, "extended effects"), (SPEC_ECC, "race eccentricity"),
-               (SPEC_ROLL, "rolling resistance"), (SPEC_MOTOR, "motor"),
-               (SPEC_ENVELOPE, "motor envelope"), (SPEC_ONE_LANE, "one lane"))
+_SPEC_WORDS = ((SPEC_EXT, "extended effects"), (SPEC_CONTACT, "contact"),
+               (SPEC_DRAG, "fluid drag"), (SPEC_FRICTION, "friction"), (SPEC_GRAVITY, "gravity"),
+               (SPEC_ECC, "race eccentricity"), (SPEC_ROLL, "rolling resistance"),
+               (SPEC_MOTOR, "motor"), (SPEC_ENVELOPE, "motor envelope"),
+               (SPEC_ONE_LANE, "one lane"))
 
 
 def describe_spec(spec: int) -> str:
@@ -921,13 +961,13 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                 rate += (b[i, B_MUR, l] * m * big_r ** 3 * (w + dph) ** 2 * (1.0 - tnh * tnh)
                          / p[P_UREG, l])
             if ext:
-                if p[P_DLAW, l] != 0.0:
+                if (spec & SPEC_DRAG) != 0 and p[P_DLAW, l] != 0.0:
                     drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
                                                     b[i, B_KQUAD, l], b[i, B_REU, l],
                                                     p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
                                                     p[P_CD3, l], p[P_CDINF, l])
                     rate += big_r * big_r * slope
-                if p[P_FRIC, l] != 0.0:
+                if (spec & SPEC_FRICTION) != 0 and p[P_FRIC, l] != 0.0:
                     normal = m * big_r * (w + dph) ** 2
                     if p[P_GRAV, l] != 0.0:
                         sp, cp = el.sincos(th + s[3 + i, l])
@@ -935,7 +975,7 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                     rate += big_r * big_r * abs(normal) * friction_secant(
                         big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
             lam[nq + 3 + i, l] = rate / b[i, B_II, l]
-            if ext and p[P_KC, l] != 0.0:
+            if ext and (spec & SPEC_CONTACT) != 0 and p[P_KC, l] != 0.0:
                 lam[nq + 3 + i, l] += _contact.contact_rate_lane(
                     s, l, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l], p[P_ZC, l],
                     p[P_REACH, l])
