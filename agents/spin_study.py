@@ -5,9 +5,8 @@ and their own replays, on the training scene (washer_reduced) and on the full wa
 For each scene it runs ``abb-gym evaluate``'s evaluation (the same seeded ``laundry_test``
 episodes for every policy, the agent's reward weights) and writes its report to
 ``<out>/<scene>/``; then the goal check of :mod:`abb_gym.evaluation.spin_goal` for each agent
-and one documentation page with both scenes side by side (``--page``).  The agents:
-``spin_redistribute_washer`` (trained on washer_reduced) and ``..._finetuned`` (that agent
-fine-tuned on the full washer with over-capacity loads oversampled).
+and one documentation page with both scenes side by side (``--page``).  ``--agents`` takes
+several (shipped names or run folders), each with its replay and its goal check.
 
     python agents/spin_study.py                                  # 100 episodes, both scenes
     python agents/spin_study.py --episodes 20 --scenes washer_reduced --page out/spin.md
@@ -28,7 +27,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = "abb_gym/SpinRedistribute-v0"
-AGENTS = ("spin_redistribute_washer", "spin_redistribute_washer_finetuned")
+AGENTS = ("spin_redistribute_washer",)
 PAGE = "spin_redistribute_washer"
 BASELINES = ("baseline:knots", "baseline:retry_at_spin", "baseline:redistribute_low",
              "baseline:laundry_oracle")
