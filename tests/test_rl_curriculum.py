@@ -51,26 +51,37 @@ def test_bad_curriculum_settings_name_the_field(value, match):
         TrainConfig.from_mapping(SPEED, entry, "x.yml", {"curriculum": value})
 
 
-def test_the_training_ranges_follow_the_curriculum_and_come_back():
+def _training_env():
+    return make_sb3_env(SPEED, 2, {"scene": "yoshida_odd", "preset": "varied",
+                                   "control_interval": 0.05})
+
+
+def _ranges_seen(venv, field: str, callback, n_steps: int, steps: int) -> list:
+    """The ``randomize`` range ``field`` of the training environment at the start of each
+    rollout of a short PPO run (2 sub-environments) with ``callback``."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-    venv = make_sb3_env(SPEED, 2, {"scene": "yoshida_odd", "preset": "varied",
-                                   "control_interval": 0.05})
-    setup = venv.unwrapped.setup
-    full = setup.config.randomize.critical_speed_scale
-    seen = []
+    setup, seen = venv.unwrapped.setup, []
 
     class Spy(BaseCallback):
         def _on_rollout_start(self):
-            seen.append(setup.config.randomize.critical_speed_scale)
+            seen.append(getattr(setup.config.randomize, field))
 
         def _on_step(self):
             return True
 
+    model = PPO("MlpPolicy", venv, n_steps=n_steps, batch_size=2 * n_steps, n_epochs=1, seed=0)
+    model.learn(steps, callback=CallbackList([callback, Spy()]))
+    return seen
+
+
+def test_the_training_ranges_follow_the_curriculum_and_come_back():
+    venv = _training_env()
+    setup = venv.unwrapped.setup
+    full = setup.config.randomize.critical_speed_scale
     settings = {"fields": ["critical_speed_scale"], "start": 0.0, "full_at": 1.0}
-    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0)
-    model.learn(256, callback=CallbackList([CurriculumCallback(settings, 256), Spy()]))
+    seen = _ranges_seen(venv, "critical_speed_scale", CurriculumCallback(settings, 256), 64, 256)
     assert seen[0] == (1.0, 1.0)  # at progress 0 with start 0: the nominal machine only
     widths = [hi - lo for lo, hi in seen]
     assert widths == sorted(widths) and 0 < widths[-1] < full[1] - full[0]
@@ -99,30 +110,16 @@ def test_oversampled_rollouts_draw_from_their_ranges_and_come_back():
     """About ``share`` of the rollouts draw their episodes from the oversampled ranges, the
     rest from the preset's, by a generator of the training seed; a range the preset would
     refuse is refused by name before any step; the preset's ranges come back at the end."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-
     from abb_gym.envs.config import PresetError
     from abb_gym.rl.curriculum import OversampleCallback
 
-    venv = make_sb3_env(SPEED, 2, {"scene": "yoshida_odd", "preset": "varied",
-                                   "control_interval": 0.05})
+    venv = _training_env()
     setup = venv.unwrapped.setup
     full = setup.config.randomize.imbalance_ratio
-    seen = []
-
-    class Spy(BaseCallback):
-        def _on_rollout_start(self):
-            seen.append(setup.config.randomize.imbalance_ratio)
-
-        def _on_step(self):
-            return True
 
     def learn(settings, seed):
-        seen.clear()
-        model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0)
-        model.learn(32 * 40, callback=CallbackList([OversampleCallback(settings, seed), Spy()]))
-        return list(seen)
+        return _ranges_seen(venv, "imbalance_ratio", OversampleCallback(settings, seed), 16,
+                            32 * 40)
 
     settings = {"share": 0.3, "randomize": {"imbalance_ratio": [1.0, 1.2]}}
     first = learn(settings, 7)

@@ -96,19 +96,34 @@ def CurriculumCallback(settings: Mapping[str, Any], total_timesteps: int, verbos
     return _callback_class()(settings, int(total_timesteps), verbose)
 
 
-def _callback_class():
+def _ranges_callback_base():
+    """The SB3 callback base of both range callbacks: the training environment's setup, and
+    its preset's ``randomize`` (``self.full``) restored when training ends."""
     BaseCallback = _callback_base()
 
-    class _Curriculum(BaseCallback):
+    class _Ranges(BaseCallback):
+        full = None
+
+        def _setup(self):
+            return self.training_env.unwrapped.unwrapped.setup
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_training_end(self) -> None:
+            setup = self._setup()
+            setup.config = dataclasses.replace(setup.config, randomize=self.full)
+
+    return _Ranges
+
+
+def _callback_class():
+    class _Curriculum(_ranges_callback_base()):
         def __init__(self, settings, total_timesteps, verbose):
             super().__init__(verbose)
             self.settings = dict(settings)
             self.total = max(int(total_timesteps), 1)
-            self.full = None
             self.fraction = None
-
-        def _setup(self):
-            return self.training_env.unwrapped.unwrapped.setup
 
         def _on_training_start(self) -> None:
             self.full = self._setup().config.randomize
@@ -127,13 +142,6 @@ def _callback_class():
                 setup.config, randomize=narrowed(self.full, f, s["fields"]))
             self.fraction = f
             self.logger.record("curriculum/fraction", f)
-
-        def _on_step(self) -> bool:
-            return True
-
-        def _on_training_end(self) -> None:
-            setup = self._setup()
-            setup.config = dataclasses.replace(setup.config, randomize=self.full)
 
     return _Curriculum
 
@@ -183,17 +191,12 @@ def OversampleCallback(settings: Mapping[str, Any], seed: int | None, verbose: i
 def _oversample_class():
     import numpy as np
 
-    BaseCallback = _callback_base()
-
-    class _Oversample(BaseCallback):
+    class _Oversample(_ranges_callback_base()):
         def __init__(self, settings, seed, verbose):
             super().__init__(verbose)
             self.settings = dict(settings)
             self.rng = np.random.default_rng(None if seed is None else [int(seed), 46])
-            self.full = self.hard = None
-
-        def _setup(self):
-            return self.training_env.unwrapped.unwrapped.setup
+            self.hard = None
 
         def _on_training_start(self) -> None:
             from ..envs.config import load_preset
@@ -208,12 +211,5 @@ def _oversample_class():
             setup.config = dataclasses.replace(setup.config,
                                                randomize=self.hard if hard else self.full)
             self.logger.record("oversample/hard", float(hard))
-
-        def _on_step(self) -> bool:
-            return True
-
-        def _on_training_end(self) -> None:
-            setup = self._setup()
-            setup.config = dataclasses.replace(setup.config, randomize=self.full)
 
     return _Oversample
