@@ -357,6 +357,46 @@ def test_every_default_step_meets_the_stated_accuracy(case, method):
     assert peak_err < 0.01 and angle_err < 1.0, (peak_err, angle_err)
 
 
+_MANY_BALLS = {
+    # 5 balls, no contact; a ramp through the critical speed, as yoshida_odd's case above
+    "yoshida_odd5 ramp": ("yoshida_odd5", SpeedProfile.ramp(40.0), 6.0),
+    # 12 balls with contact, oil drag and gravity; 5 rad/s^2 through the tub's resonance to
+    # 60 rad/s.  DOP853 at rtol 1e-10 and 1e-12 agree to 1e-13 on the peak and 0.12 deg on
+    # the angles here, so the reference resolves the stated 1 deg
+    "washer ramp": ("washer", SpeedProfile.ramp(5.0, 125.66), 12.0),
+}
+_ANGLES_OFF = ("the default step does not keep the stated 1 deg of the final ball angles on "
+               "the washer: the error grows once the clumped balls collide at speed (after "
+               "6 s), 2.7 deg (rk4) and 3.0 deg (etdrk4) at 12 s; dopri5 keeps 0.8 deg")
+
+
+@pytest.mark.parametrize("case, method", [
+    ("yoshida_odd5 ramp", "rk4"), ("yoshida_odd5 ramp", "etdrk4"),
+    ("yoshida_odd5 ramp", "dopri5"),
+    pytest.param("yoshida_odd5 ramp", "ros2", marks=pytest.mark.xfail(
+        strict=True, reason="ros2's default step: 5 % off the peak whirl, 2.1 deg")),
+    pytest.param("washer ramp", "rk4", marks=pytest.mark.xfail(strict=True, reason=_ANGLES_OFF)),
+    pytest.param("washer ramp", "etdrk4",
+                 marks=pytest.mark.xfail(strict=True, reason=_ANGLES_OFF)),
+    ("washer ramp", "dopri5"),
+])
+def test_the_stated_accuracy_with_many_balls(case, method):
+    """The stated 1 % of the peak whirl and 1 deg of the final ball angles against DOP853 on
+    the many-ball scenes the environments integrate (issue "Many balls and small batches").
+    The peak holds on both scenes for every method here (within 1e-5 on the washer); where
+    the angles do not, the case is an expected failure that says by how much."""
+    name, drive, t_end = _MANY_BALLS[case]
+    scene = load_scene(name)
+    if case not in _REFERENCES:
+        _REFERENCES[case] = simulate(scene, drive, t_end, method="DOP853", rtol=1e-10,
+                                     output_dt=0.01, max_steps=400_000)
+    ref = _REFERENCES[case]
+    tr = simulate(scene, drive, t_end, method=method, output_dt=0.01)
+    peak_err = abs(tr.whirl_ratio.max() / ref.whirl_ratio.max() - 1)
+    angle_err = np.degrees(np.max(np.abs(tr.ball_angles[-1] - ref.ball_angles[-1])))
+    assert peak_err < 0.01 and angle_err < 1.0, (peak_err, angle_err)
+
+
 def test_ros2_default_step_is_its_own():
     scene = load_scene("yoshida_odd")
     assert default_step(scene, 240.0, "ros2") == pytest.approx(0.05 / 240.0)
