@@ -89,7 +89,6 @@ def beyond_capacity(policies, scene: str, episodes: int, env_kwargs: dict, seed:
     import numpy as np
 
     from abb_gym.evaluation import evaluate as ev
-    from abb_gym.evaluation.registry import resolve
     from abb_gym.physics.scene import load_scene
 
     cap = load_scene(scene).balancing_capacity
@@ -102,8 +101,7 @@ def beyond_capacity(policies, scene: str, episodes: int, env_kwargs: dict, seed:
         chunk = ev.Chunk(ENV, scene, "laundry_test", spec, 0, tuple(range(episodes)),
                          env_kwargs=tuple(sorted(env_kwargs.items())),
                          reset_options=(("imbalance_ratio", loads), ("redistributions", draws)))
-        policy = resolve(spec, ENV, scene)
-        rows = ev.run_chunk(chunk, policy)[0]
+        rows = ev.run_chunk(chunk)[0]
         out.append(ev.EvaluationResult(rows[0]["policy"], ENV, scene, "laundry_test", 0,
                                        episodes=rows))
     return out

@@ -202,8 +202,9 @@ def _oversample_class():
             from ..envs.config import load_preset
             setup = self._setup()
             self.full = setup.config.randomize
-            over = {**setup.config.to_dict()["randomize"], **self.settings["randomize"]}
-            self.hard = load_preset(setup.config, randomize=over).randomize
+            # a preset's override: merged over its randomize section and checked as one
+            self.hard = load_preset(setup.config,
+                                    randomize=self.settings["randomize"]).randomize
 
         def _on_rollout_start(self) -> None:
             hard = bool(self.rng.random() < self.settings["share"])
