@@ -192,3 +192,36 @@ def test_the_busy_neighbour_runs_during_the_block_and_is_gone_after():
             assert user_s > 0.05  # it spins (up to 1 s by now; less on a loaded machine)
             raise RuntimeError("the block fails")
     assert proc.poll() is not None
+
+
+def test_a_cost_burst_counts_its_own_steps_in_whole_episodes(monkeypatch):
+    """CPU time per env-step divides a burst's CPU time by that burst's env-steps (not the
+    next burst's, whose size adapts to the wall time), and every burst is whole episodes: an
+    env-step's cost follows the episode (the step shortens as the rotor speeds up)."""
+    import gymnasium as gym
+
+    from abb_gym.benchmarks import env_cost
+
+    class Counting:
+        num_envs = 3
+        single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+        def __init__(self):
+            self.steps = 0
+
+        def reset(self, seed=None):
+            return None
+
+        def step(self, action):
+            self.steps += 1
+
+    env = Counting()
+    case = env_cost._Case(env)
+    monkeypatch.setattr(env_cost, "BURST_S", 1e9)  # every burst asks for 4x the last
+    done = 0
+    for _ in range(3):
+        wall, cpu, steps = case.burst()
+        assert steps == env.num_envs * (env.steps - done)
+        assert (env.steps - done) % env_cost.EPISODE_STEPS == 0
+        done = env.steps
+    assert env.steps == env_cost.EPISODE_STEPS * (1 + 4 + 16)

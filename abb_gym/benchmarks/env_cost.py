@@ -10,6 +10,13 @@ env-step; where the thread counts differ, the CPU time counts every thread's wor
 that waits at a barrier counts what it spins).  Each table says the machine's load (the
 one-minute load average) when it ran.
 
+The cost tables (ball count, washer, CartPole) step every case on **one thread**, so that the
+CPU time is the work of the step alone.  With the default threads it also counts the OpenMP
+worker's wait after each parallel step (up to :data:`abb_gym._threads.SHORT_SPIN` spins, about
+0.17 ms here), a share that depends on the step's length and on what else the machine runs: it
+made the ``yoshida_odd`` reference row of one table cost 0.3-1.1 us per env-step from run to
+run, and every ratio to it with it.
+
 Tables:
 
 * :func:`ball_count_table` - the vector environment at 256 sub-environments of the
@@ -62,8 +69,15 @@ def _env(scene, num_envs: int, preset: str = "train", **kw):
 
 
 class _Case:
-    """One vector environment stepped in bursts with random actions (resets included), on
-    ``threads`` numba threads (None: the default)."""
+    """One vector environment stepped in bursts of whole episodes, with the same random
+    actions in every episode (resets included), on ``threads`` numba threads (None: the
+    default).
+
+    Whole episodes, because an env-step's cost follows the episode: the step rule shortens
+    the integrator's step as the rotor speeds up (the rolling resistance's slope grows with
+    the speed squared), and the sub-environments of a benchmark start their episodes
+    together.  ``yoshida_odd`` at 256 sub-environments cost 0.24-1.5 us per env-step from one
+    quarter-second burst to the next in one process when the bursts cut episodes anywhere."""
 
     def __init__(self, env, threads: int | None = None, seed: int = 0):
         self.env = env
@@ -71,14 +85,14 @@ class _Case:
         self.n = env.num_envs
         env.reset(seed=seed)
         rng = np.random.default_rng(seed)
-        shape = (64, self.n) + env.single_action_space.shape
+        shape = (EPISODE_STEPS, self.n) + env.single_action_space.shape
         self.actions = rng.uniform(-1.0, 1.0, shape).astype(env.single_action_space.dtype)
         self.k = 0
-        self.steps_per_burst = 1
+        self.steps_per_burst = EPISODE_STEPS
 
     def step(self, count: int) -> None:
         for _ in range(count):
-            self.env.step(self.actions[self.k % 64])
+            self.env.step(self.actions[self.k % len(self.actions)])
             self.k += 1
 
     def burst(self) -> tuple[float, float, int]:
@@ -95,10 +109,12 @@ class _Case:
             wall, cpu = time.perf_counter() - w0, time.process_time() - c0
         finally:
             numba.set_num_threads(before)
-        # aim each burst at BURST_S of wall time
-        self.steps_per_burst = max(1, int(self.steps_per_burst * min(4.0, BURST_S /
-                                                                  max(wall, 1e-6))))
-        return wall, cpu, self.n * self.steps_per_burst
+        steps = self.n * self.steps_per_burst
+        # aim each burst at BURST_S of wall time, in whole episodes
+        episodes = int(self.steps_per_burst * min(4.0, BURST_S / max(wall, 1e-6))
+                       // EPISODE_STEPS)
+        self.steps_per_burst = EPISODE_STEPS * max(1, episodes)
+        return wall, cpu, steps
 
     def close(self) -> None:
         self.env.close()
@@ -231,7 +247,7 @@ def _measure_and_close(cases: dict, rounds: int) -> tuple[dict, dict]:
 def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: int = 7,
                      ops: dict | None = None) -> list[dict]:
     """The vector environment per ball count, contact off and on, against 2 balls without
-    contact: CPU us per env-step, its ratio, the same per integrator substep (contact
+    contact, on one thread: CPU us per env-step, its ratio, the same per integrator substep (contact
     shortens the step), the operation-count ratio (``ops``, default :func:`operation_count`)
     and the quotient of the last two (the target: within 1.3)."""
     ops = operation_count(ball_counts) if ops is None else ops
@@ -239,10 +255,10 @@ def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: 
     for contact in (False, True):
         # (the nominal preset: the balls start where the scene spreads them; the train preset
         # would draw them into each other, and contact then takes every pair)
-        cases = {n: _Case(_env(_ring_scene(n, contact), num_envs, preset="nominal"))
+        cases = {n: _Case(_env(_ring_scene(n, contact), num_envs, preset="nominal"), threads=1)
                  for n in ball_counts}
-        base = (_Case(_env(_ring_scene(2, False), num_envs, preset="nominal")) if contact
-                else None)
+        base = (_Case(_env(_ring_scene(2, False), num_envs, preset="nominal"), threads=1)
+                if contact else None)
         if base is not None:
             cases["base"] = base
         res, steps = _measure_and_close(cases, rounds)
@@ -265,13 +281,13 @@ def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: 
 
 def washer_row(num_envs: int = 256, rounds: int = 7, integrator: str | None = None) -> dict:
     """The washer against ``yoshida_odd`` at ``num_envs`` sub-environments, CPU time per
-    env-step (the target: <= 10x).  The washer runs the ``nominal`` preset (its balls start
+    env-step on one thread (the target: <= 10x).  The washer runs the ``nominal`` preset (its balls start
     where the scene puts them): the ``train`` preset draws each ball's angle over the whole
     circle, which puts balls with contact into each other (every lane then takes the
     all-pairs contact: :func:`abb_gym.physics.model._contacts`)."""
     kw = {} if integrator is None else {"integrator": integrator}
-    cases = {"washer": _Case(_env("washer", num_envs, preset="nominal", **kw)),
-             "yoshida_odd": _Case(_env("yoshida_odd", num_envs))}
+    cases = {"washer": _Case(_env("washer", num_envs, preset="nominal", **kw), threads=1),
+             "yoshida_odd": _Case(_env("yoshida_odd", num_envs), threads=1)}
     res, steps = _measure_and_close(cases, rounds)
     return {"num_envs": num_envs, "integrator": integrator or "default",
             "washer_cpu_us": round(res["washer"]["cpu_us"], 2),
@@ -344,7 +360,7 @@ class _CartPole:
         self.n = num_envs
         self.acts = np.random.default_rng(0).integers(0, 2, size=(64, num_envs))
         self.k = 0
-        self.steps_per_burst = 1
+        self.steps_per_burst = EPISODE_STEPS
         self.threads = None
 
     step = _Case.step
