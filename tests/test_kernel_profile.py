@@ -50,7 +50,9 @@ def test_perf_map_names_a_function_compiled_in_this_process(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, field", [({"envs": 0}, "envs"), ({"seconds": 0.1}, "seconds"),
-                                           ({"precision": "float16"}, "precision")])
+                                           ({"precision": "float16"}, "precision"),
+                                           ({"scene": "no_such_scene"}, "scene"),
+                                           ({"integrator": "euler"}, "integrator")])
 def test_profile_names_the_bad_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
         kp.profile(**kwargs)

@@ -39,11 +39,11 @@ __all__ = ["measure", "vector_rate", "batch_rate", "single_rate", "cartpole_rate
 
 
 def make_vector(num_envs: int, kernel: str | None, integrator: str = "rk4",
-                precision: str = "float64", preset: str = "train"):
+                precision: str = "float64", preset: str = "train", scene: str = SCENE):
     """The vector environment every speed benchmark steps (``bench speed``'s rows,
     :mod:`~abb_gym.benchmarks.block_size`, :mod:`~abb_gym.benchmarks.kernel_profile`)."""
     return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        scene=SCENE, preset=preset, control_interval=0.01,
+                        scene=scene, preset=preset, control_interval=0.01,
                         integrator=integrator, precision=precision, kernel=kernel,
                         max_episode_steps=EPISODE_STEPS)
 

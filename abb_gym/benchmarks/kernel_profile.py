@@ -3,6 +3,7 @@
 
     python -m abb_gym.benchmarks.kernel_profile [--envs 1024] [--precision float64]
                                                 [--seconds 8] [--top 15]
+                                                [--scene yoshida_odd] [--integrator rk4]
 
 numba's compiled code is anonymous memory to ``perf``: its samples show as bare addresses
 ("[JIT] tid ...").  ``perf`` names such code from a map file, ``/tmp/perf-<pid>.map``
@@ -10,7 +11,8 @@ numba's compiled code is anonymous memory to ``perf``: its samples show as bare 
 function that numba compiled *in this process* (a kernel loaded from the on-disk cache keeps no
 names, so the profiled process compiles with an empty cache of its own: a minute or two).
 
-The command starts such a process, which builds the vector environment (``yoshida_odd``,
+The command starts such a process, which builds the vector environment (``yoshida_odd``
+unless ``--scene`` names another, with the scene's balls where it puts them for any other;
 10 ms steps, 100-step episodes: the rows of ``abb-gym bench speed``), steps it until every
 kernel is compiled, writes the map and says so; only then does ``perf record`` attach to it
 (``-p``), so the profile holds the steady state only, compile excluded.  It prints the
@@ -33,7 +35,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..physics.methods import PRECISIONS
+from ..physics.methods import COMPILED_METHODS, PRECISIONS
 
 __all__ = ["write_perf_map", "readable_name", "profile", "main"]
 
@@ -108,7 +110,9 @@ import numpy as np
 from abb_gym.benchmarks.env_speed import make_vector
 from abb_gym.benchmarks.kernel_profile import write_perf_map
 n, precision, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
-env = make_vector(n, "specialised", precision=precision)
+scene, integrator = sys.argv[4], sys.argv[5]
+env = make_vector(n, "specialised", integrator=integrator, precision=precision, scene=scene,
+                  preset="train" if scene == "yoshida_odd" else "nominal")
 env.reset(seed=0)
 actions = np.random.default_rng(0).uniform(0.2, 1.0, (300, n, 1)).astype(np.float32)
 for k in range(120):  # past an episode's end: the reset path compiles too
@@ -138,7 +142,8 @@ def _report(data: Path, sort: str) -> list[tuple[float, str]]:
 
 
 def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
-            top: int = 15, out: Path | None = None) -> dict:
+            top: int = 15, out: Path | None = None, scene: str = "yoshida_odd",
+            integrator: str = "rk4") -> dict:
     """Profile the vector environment's steady state (module docstring); returns the rows
     ``{"libraries": [(percent, name)], "functions": [(percent, name)], "rate": str}``."""
     if not 1 <= envs <= 65536:
@@ -147,6 +152,11 @@ def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
         raise ValueError(f"seconds must be in [0.5, 600] (got {seconds})")
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {PRECISIONS} (got {precision!r})")
+    if integrator not in COMPILED_METHODS:
+        raise ValueError(f"integrator must be one of {COMPILED_METHODS} (got {integrator!r})")
+    from ..physics.scene import list_scenes
+    if scene not in list_scenes():
+        raise ValueError(f"scene must be one of {list_scenes()} (got {scene!r})")
     if shutil.which("perf") is None:
         raise RuntimeError("kernel_profile needs Linux perf on the PATH (package linux-perf "
                            "or linux-tools)")
@@ -156,7 +166,8 @@ def profile(envs: int = 1024, precision: str = "float64", seconds: float = 8.0,
     print("kernel_profile: compiling the kernels in an empty cache (a minute or two) ...",
           file=sys.stderr, flush=True)
     child = subprocess.Popen([sys.executable, "-c", _CHILD, str(envs), precision,
-                              str(seconds + 2.0)], env=env, stdout=subprocess.PIPE, text=True)
+                              str(seconds + 2.0), scene, integrator], env=env,
+                             stdout=subprocess.PIPE, text=True)
     try:
         assert child.stdout is not None
         for line in child.stdout:
@@ -185,9 +196,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--precision", choices=PRECISIONS, default="float64")
     ap.add_argument("--seconds", type=float, default=8.0, help="profiled time [s]")
     ap.add_argument("--top", type=int, default=15, help="functions to list")
+    ap.add_argument("--scene", default="yoshida_odd",
+                    help="scene (default yoshida_odd; others start from the nominal preset)")
+    ap.add_argument("--integrator", default="rk4", help="integrator (default rk4)")
     args = ap.parse_args(argv)
     try:
-        result = profile(args.envs, args.precision, args.seconds, args.top)
+        result = profile(args.envs, args.precision, args.seconds, args.top, scene=args.scene,
+                         integrator=args.integrator)
     except (RuntimeError, ValueError) as exc:
         print(f"kernel_profile: {exc}", file=sys.stderr)
         return 2
