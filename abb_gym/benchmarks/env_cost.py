@@ -13,9 +13,7 @@ one-minute load average) when it ran.
 The cost tables (ball count, washer, CartPole) step every case on **one thread**, so that the
 CPU time is the work of the step alone.  With the default threads it also counts the OpenMP
 worker's wait after each parallel step (up to :data:`abb_gym._threads.SHORT_SPIN` spins, about
-0.17 ms here), a share that depends on the step's length and on what else the machine runs: it
-made the ``yoshida_odd`` reference row of one table cost 0.3-1.1 us per env-step from run to
-run, and every ratio to it with it.
+0.17 ms here), a share that depends on the step's length and on what else the machine runs.
 
 Tables:
 
