@@ -1,4 +1,4 @@
-"""Elementary functions that the compiler can vectorise: sin, cos, exp, tanh without calls.
+"""Elementary functions that the compiler can vectorise: sin, cos, exp, log, tanh without calls.
 
 The equations of motion need sin and cos of the rotor and ball angles and tanh of the smoothed
 rolling resistance at every right-hand side.  Calls into the C library block LLVM's loop
@@ -20,6 +20,7 @@ function               arguments                     error
 :func:`sincos`         ``|x| <= 1.6e6`` rad          <= 2 ulp of the result, or 2 ulp of 1 near
                                                      a zero of the function (absolute 4.5e-16)
 :func:`exp_bounded`    ``[-708, 709]``               <= 2 ulp
+:func:`log_positive`   positive normal finite        <= 1 ulp
 :func:`tanh`           all finite                    <= 6 ulp relative
 =====================  ============================  ==========================================
 
@@ -63,7 +64,7 @@ from .._numba import njit
 _llvm.set_option("abb_gym", "-unroll-threshold=2000")
 _llvm.set_option("abb_gym", "-force-vector-interleave=2")
 
-__all__ = ["sincos", "exp_bounded", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like",
+__all__ = ["sincos", "exp_bounded", "log_positive", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like",
            "is_single"]
 
 SINCOS_LIMIT = 1.6e6
@@ -246,6 +247,45 @@ def exp_bounded(y):
     """e^y for y in [-708, 709] without library calls (<= 2 ulp)."""
     scale, p = _expm1_reduced(y)
     return scale + scale * p
+
+
+# log: the fdlibm minimax coefficients of (log(1+f) - 2s) / s^3 in s^2, s = f / (2 + f)
+_LG1 = 6.666666666666735130e-01
+_LG2 = 3.999999999940941908e-01
+_LG3 = 2.857142874366239149e-01
+_LG4 = 2.222219843214978396e-01
+_LG5 = 1.818357216161805012e-01
+_LG6 = 1.531383769920937332e-01
+_LG7 = 1.479819860511658591e-01
+_SQRT2 = 1.41421356237309514547e+00
+# 2^52 + 1023 and its bits: the biased exponent e, placed in the low mantissa bits of 2^52,
+# reads back as 2^52 + e (the exponent as a float without an int64-to-double conversion)
+_TWO52 = 4503599627370496.0
+_TWO52_BITS = 0x4330000000000000
+_MANTISSA = 0x000FFFFFFFFFFFFF
+_ONE_BITS = 0x3FF0000000000000
+LOG_MIN = 2.2250738585072014e-308
+
+
+@njit(cache=True, inline="always")
+def log_positive(x):
+    """Natural logarithm of a positive, normal, finite float64 (``LOG_MIN <= x < inf``)
+    without library calls (<= 1 ulp; fdlibm's ``e_log.c`` without its special cases, which
+    only save work).  Outside that range the result is meaningless, not NaN: callers keep
+    their arguments in it."""
+    bits = _to_bits(x)
+    e = _from_bits(_TWO52_BITS | (bits >> 52), x) - (_TWO52 + 1023.0)
+    m = _from_bits((bits & _MANTISSA) | _ONE_BITS, x)  # x = 2^e m, m in [1, 2)
+    big = m > _SQRT2
+    m = 0.5 * m if big else m  # exact; m in [sqrt(2)/2, sqrt(2)], |f| <= 0.414
+    e = e + 1.0 if big else e
+    f = m - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    r = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7))) + w * (_LG2 + w * (_LG4 + w * _LG6))
+    hfsq = 0.5 * f * f
+    return e * _LN2_HI - ((hfsq - (s * (hfsq + r) + e * _LN2_LO)) - f)
 
 
 @njit(cache=True, inline="always")

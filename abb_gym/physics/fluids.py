@@ -78,6 +78,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from .._numba import njit
+from . import elementary as el
 
 __all__ = ["Fluid", "FLUIDS", "DRAG_LAWS", "fluid_properties", "drag_coefficient",
            "law_coefficients", "stokes_drag_coefficient", "SPANNAN_6_9_PRINTED", "RE_STOKES",
@@ -87,6 +88,8 @@ T_NOMINAL = 298.15  # K, 25 C: the reference temperature of the tables
 T_RANGE = (250.0, 400.0)  # K, where eq. 6.1 is used (its VTC anchors are 311 K and 372 K)
 RE_STOKES = 10.0  # upper end of the Stokes regime (eqs. 5.21, 6.9)
 RE_PLATEAU = 2.0e4  # start of the constant-c_d plateau (eqs. 5.21, 6.9)
+LN10 = math.log(10.0)
+INV_LN10 = 1.0 / LN10
 
 # drag-law identifiers used by the kernel
 LAW_NONE = 0  # ball_drag only
@@ -251,8 +254,12 @@ def race_drag(u, law, klin, kquad, re_per_speed, a0, a1, a2, a3, plateau):
     if re > RE_PLATEAU:
         f = kquad * plateau * abs(u)
         return f * u, 2.0 * f
-    lg = math.log10(re)
-    cd = 10.0 ** (a0 + lg * (a1 + lg * (a2 + lg * a3)))
+    # log10 and 10^Y by the branch-free log and exp of abb_gym.physics.elementary (the C
+    # library's log10 and pow would keep every lane loop over the balls scalar), on Re held
+    # inside the middle range so that lanes in the other regimes compute harmless numbers
+    re_mid = min(max(float(re), RE_STOKES), RE_PLATEAU)
+    lg = el.log_positive(re_mid) * INV_LN10
+    cd = el.exp_bounded(LN10 * (a0 + lg * (a1 + lg * (a2 + lg * a3))))
     slope = a1 + lg * (2.0 * a2 + 3.0 * lg * a3)  # dY/dL: d(c_d u|u|)/du = c_d |u| (2 + Y')
     f = kquad * cd * abs(u)
     return f * u, f * (2.0 + slope)
