@@ -361,13 +361,21 @@ _MANY_BALLS = {
     # 5 balls, no contact; a ramp through the critical speed, as yoshida_odd's case above
     "yoshida_odd5 ramp": ("yoshida_odd5", SpeedProfile.ramp(40.0), 6.0),
     # 12 balls with contact, oil drag and gravity; 5 rad/s^2 through the tub's resonance to
-    # 60 rad/s.  DOP853 at rtol 1e-10 and 1e-12 agree to 1e-13 on the peak and 0.12 deg on
+    # 60 rad/s.  DOP853 at rtol 1e-10 and 1e-12 agree to 1e-13 on the peak and 0.08 deg on
     # the angles here, so the reference resolves the stated 1 deg
     "washer ramp": ("washer", SpeedProfile.ramp(5.0, 125.66), 12.0),
 }
 _ANGLES_OFF = ("the default step does not keep the stated 1 deg of the final ball angles on "
-               "the washer: the error grows once the clumped balls collide at speed (after "
-               "6 s), 2.7 deg (rk4) and 3.0 deg (etdrk4) at 12 s; dopri5 keeps 0.8 deg")
+               "the washer: the error grows once the clumped balls collide at speed (0.3 deg "
+               "at 6 s, 1 deg at 8 s), 2.7 deg (rk4) and 3.0 deg (etdrk4) at 12 s")
+# DOP853 moves the final angles by 0.07 deg when every start angle moves by 1e-9 rad: the
+# case is not chaotic at the stated 1 deg.  dopri5 at its default tolerance
+# is 0.65-4.3 deg off over start angles shifted by 0, 1e-9, 2e-9 and 1e-8 rad, so which side of
+# 1 deg this one case falls on is chance (simulate(scene.replace(ball_angles0=angles + shift),
+# ...) against DOP853 from the same start)
+_DOPRI5_ANGLES = ("dopri5's default tolerance does not keep 1 deg of the washer's final ball "
+                  "angles reliably: 0.65-4.3 deg over start angles shifted by up to 1e-8 rad, "
+                  "4.3 deg on this case")
 
 
 @pytest.mark.parametrize("case, method", [
@@ -378,7 +386,8 @@ _ANGLES_OFF = ("the default step does not keep the stated 1 deg of the final bal
     pytest.param("washer ramp", "rk4", marks=pytest.mark.xfail(strict=True, reason=_ANGLES_OFF)),
     pytest.param("washer ramp", "etdrk4",
                  marks=pytest.mark.xfail(strict=True, reason=_ANGLES_OFF)),
-    ("washer ramp", "dopri5"),
+    pytest.param("washer ramp", "dopri5",
+                 marks=pytest.mark.xfail(strict=True, reason=_DOPRI5_ANGLES)),
 ])
 def test_the_stated_accuracy_with_many_balls(case, method):
     """The stated 1 % of the peak whirl and 1 deg of the final ball angles against DOP853 on

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 
 from .._numba import njit
+from . import elementary as el
 
 TWO_PI = 2.0 * math.pi
 
@@ -53,11 +54,12 @@ def pair_geometry(phi_i, phi_j, big_r, reach):
     """(penetration [m], d chord / d(ph_j - ph_i) [m], sin(|d|/2)) of a ball pair."""
     d = wrap_angle(phi_j - phi_i)
     half = 0.5 * abs(d)
-    pen = reach - 2.0 * big_r * math.sin(half)
-    dchord = big_r * math.cos(half)
+    sh, ch = el.sincos(half)
+    pen = reach - 2.0 * big_r * sh
+    dchord = big_r * ch
     if d < 0.0:
         dchord = -dchord
-    return pen, dchord, math.sin(half)
+    return pen, dchord, sh
 
 
 @njit(cache=True, inline="always")
@@ -124,8 +126,8 @@ def may_touch(d, reach_angle):
     """Whether a pair of balls ``d`` [rad] apart (wrapped, as :func:`pair_geometry` wraps
     it) may touch, for the ``reach_angle`` of :func:`neighbour_reach_angle`: False only where
     :func:`pair_force` is certain to find no penetration, so that it need not be asked there
-    (its sine and cosine are C library calls, which a lane loop cannot vectorise).  Without
-    branches."""
+    (a few operations against the pair force's sine, cosine, square root and division).
+    Without branches."""
     return abs(d) <= reach_angle or reach_angle >= GUARD_LIMIT
 
 
@@ -177,6 +179,30 @@ def _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k):
     if pen > 0.0:
         return k * (1.0 / b[i, col_m, l] + 1.0 / b[j, col_m, l])
     return 0.0
+
+
+@njit(cache=True, inline="always")
+def add_contact_rates_lane(s, l, b, col_r, col_m, big_r, k, zeta, reach_angle, out, row):
+    """:func:`contact_rate_lane` of every ball of lane ``l``, added to ``out[row + i, l]``
+    [1/s].  Where the neighbour list holds (four or more balls, :func:`ring_holds`), each
+    neighbour pair's term is computed once and shared by its two balls, and the ring test is
+    made once for the lane instead of once per ball: the same two terms per ball, summed to
+    the same bits (a sum of two non-negative terms is the same in either order, and
+    :func:`pair_geometry` gives a pair the same numbers in either order)."""
+    n = b.shape[0]
+    if n >= 4 and ring_holds(s, l, n, reach_angle):
+        scale = max(1.0, 2.0 * zeta)
+        first = _pair_rate2(s, l, n - 1, 0, b, col_r, col_m, big_r, k)
+        left = first
+        for i in range(n):
+            right = _pair_rate2(s, l, i, i + 1, b, col_r, col_m, big_r, k) if i + 1 < n \
+                else first
+            both = left + right
+            out[row + i, l] += math.sqrt(both) * scale if both > 0.0 else 0.0
+            left = right
+    else:
+        for i in range(n):
+            out[row + i, l] += contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta)
 
 
 @njit(cache=True)

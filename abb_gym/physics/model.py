@@ -158,11 +158,11 @@ SPEC_ENVELOPE = 16  # a motor with a torque-speed envelope
 # lane count is a compile-time constant too (lanes_of)
 SPEC_ONE_LANE = 32
 # which of the extended effects (under SPEC_EXT) exist: a kernel compiled without one has none
-# of its code.  Each term is also guarded by its lane's parameter (p[P_KC] != 0, ...), a
-# branch that LLVM turned into a select: it then evaluated the fluid drag's log10 and pow and
-# the friction law's exp and tanh (C library calls, which also kept the lane loops scalar) in
-# every lane of every kernel with any extended effect, and threw the results away.  With the
-# bits, a lane computes what it did before, so the results are the same bits.
+# of its code.  Each term is also guarded by its lane's parameter (p[P_KC] != 0, ...), but LLVM
+# turns such a branch into a select, which evaluates both sides in every lane: without the
+# bits, every kernel with any extended effect would compute the fluid drag and the friction
+# law in every lane and throw the results away.  A lane computes the same terms either way,
+# so the bits change the cost, not the results.
 SPEC_CONTACT = 64   # ball-ball contact (P_KC != 0)
 SPEC_DRAG = 128     # a nonlinear fluid drag law (P_DLAW != 0)
 SPEC_FRICTION = 256  # race friction (P_FRIC != 0)
@@ -456,13 +456,11 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     order along the race therefore never changes, and a ball can only touch the next ball
     ahead and the next behind: n pairs instead of n (n - 1) / 2 (12 instead of 66 for the
     washer).  Here the neighbours are the balls of adjacent index (ball n - 1 next to ball 0),
-    each pair in two lane loops: one without branches (it vectorises) puts every lane's pair
-    at rest and asks whether the two balls are within the reach angle
-    (:func:`~abb_gym.physics.contact.may_touch`), and only where they are, and only if any
-    lane's are, a second one computes the pair force (:func:`~abb_gym.physics.contact.
-    pair_force`, whose sine and cosine are C library calls: asked for every lane, they cost
-    the spread balls of a ring about as much as the rest of the right-hand side).  A pair
-    beyond the reach angle has no force, so the results are the same bits.
+    each pair in two lane loops without branches (they vectorise): the first asks whether
+    any lane's two balls are within the reach angle (:func:`~abb_gym.physics.contact.
+    may_touch`, a few operations), and only if some are, the second computes every lane's
+    pair force (:func:`~abb_gym.physics.contact.pair_force`, which is 0 for a pair beyond
+    the reach angle), so that the spread balls of a ring cost a test per pair.
 
     **When it does not apply.**  Index order need not be race order (a scene's or an episode's
     initial angles in any order), and a penalty contact lets a ball through a neighbour when
@@ -490,23 +488,23 @@ def _contacts(s, p, b, ds, work, nb, nq, L):
     for k in range(pairs):
         lo = 0 if k == nb - 1 else k
         hi = nb - 1 if k == nb - 1 else k + 1
-        # every lane's pair at rest (a loop that vectorises), then the pair force of the lanes
-        # where the two balls may touch (a scalar loop: the force's sine and cosine)
+        # whether any lane's two balls may touch (a cheap test), and only then every lane's
+        # pair force (both loops without branches or calls: they vectorise)
         near = 0
         for l in range(L):
-            work[k, W_PQ, l] = 0.0
-            work[k, W_PN, l] = 0.0
             near += 1 if _pair_may_touch(s, p, l, lo, hi) else 0
         if near == 0:
+            for l in range(L):
+                work[k, W_PQ, l] = 0.0
+                work[k, W_PN, l] = 0.0
             continue
         for l in range(L):
-            if _pair_may_touch(s, p, l, lo, hi):
-                _, q, radial = _contact.pair_force(
-                    s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l],
-                    p[P_R, l], b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l],
-                    b[hi, B_MEFF, l], p[P_KC, l], p[P_ZC, l])
-                work[k, W_PQ, l] = q
-                work[k, W_PN, l] = radial
+            _, q, radial = _contact.pair_force(
+                s[3 + lo, l], s[3 + hi, l], s[nq + 3 + lo, l], s[nq + 3 + hi, l],
+                p[P_R, l], b[lo, B_RADIUS, l] + b[hi, B_RADIUS, l], b[lo, B_MEFF, l],
+                b[hi, B_MEFF, l], p[P_KC, l], p[P_ZC, l])
+            work[k, W_PQ, l] = q
+            work[k, W_PN, l] = radial
     for i in range(nb):
         # ball i is the higher index of pair i - 1 (+q) and the lower of pair i (-q); ball 0
         # the lower of pair n - 1 too, ball n - 1 its higher (the all-pairs loop's order)
@@ -975,10 +973,13 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
                     rate += big_r * big_r * abs(normal) * friction_secant(
                         big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
             lam[nq + 3 + i, l] = rate / b[i, B_II, l]
-            if ext and (spec & SPEC_CONTACT) != 0 and p[P_KC, l] != 0.0:
-                lam[nq + 3 + i, l] += _contact.contact_rate_lane(
-                    s, l, i, b, B_RADIUS, B_MEFF, big_r, p[P_KC, l], p[P_ZC, l],
-                    p[P_REACH, l])
+    if ext and (spec & SPEC_CONTACT) != 0:
+        # a lane loop of its own: the loop above, without it, has no branches and no calls
+        for l in range(L):
+            if p[P_KC, l] != 0.0:
+                _contact.add_contact_rates_lane(s, l, b, B_RADIUS, B_MEFF, p[P_R, l],
+                                                p[P_KC, l], p[P_ZC, l], p[P_REACH, l], lam,
+                                                nq + 3)
 
 
 @njit(cache=True, error_model="numpy")
