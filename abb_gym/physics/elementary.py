@@ -1,7 +1,8 @@
 """Elementary functions that the compiler can vectorise: sin, cos, exp, log, tanh without calls.
 
 The equations of motion need sin and cos of the rotor and ball angles and tanh of the smoothed
-rolling resistance at every right-hand side.  Calls into the C library block LLVM's loop
+rolling resistance at every right-hand side, and with extended effects the sine and cosine of
+each touching pair's half gap and the log and power of the fluid drag's c_d(Re) law.  Calls into the C library block LLVM's loop
 vectoriser, so the compiled kernels evaluate them with the branch-free polynomials below
 (argument reduction plus the fdlibm minimax polynomials), which vectorise across environments
 and give the same result in every path (single environment, vector environment, ``simulate``).
