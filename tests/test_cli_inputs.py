@@ -632,3 +632,20 @@ def test_every_command_exits_0_or_2_with_one_line_naming_the_argument(line):
     assert lines[0].startswith("abb-gym"), (argv, err)
     if code == 2:
         assert any(n in lines[0] for n in names), (argv, lines[0], sorted(names))
+
+
+@pytest.mark.parametrize("option", ["--out", "--resume-dir"])
+def test_evaluate_refuses_an_empty_path_before_it_builds_an_environment(option, monkeypatch,
+                                                                        capsys):
+    """Building the policies' environments may compile a kernel, whose notice would join the
+    refusal on stderr (it did, on a clean clone's cold cache): the path comes first."""
+    from abb_gym.cli import main
+    from abb_gym.evaluation import evaluate as ev
+
+    def built(*args, **kwargs):
+        raise AssertionError("an environment was built before the path was checked")
+
+    monkeypatch.setattr(ev, "check_inputs", built)
+    assert main(["evaluate", "--policy", "baseline:ramp", option, ""]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and option in err[0]

@@ -110,8 +110,11 @@ def run(args) -> int:
     apply_test_set_defaults(args)
     from ..evaluation.evaluate import MAX_EPISODES, check_inputs, evaluate
     from ..evaluation.report import reward_line, summary_table, write_report
-    from .outputs import output_folder
+    from .outputs import check_path, output_folder
     # every input before any folder or task: one line, exit 2
+    check_path(args.out, "--out")
+    if getattr(args, "resume_dir", None) is not None:
+        check_path(args.resume_dir, "--resume-dir")
     for label, n, least in (("--episodes", args.episodes, 1), ("--sweep", args.sweep, 0),
                             ("--sweep-episodes", args.sweep_episodes, 1)):
         if not least <= n <= MAX_EPISODES:

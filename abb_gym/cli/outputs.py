@@ -21,7 +21,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["output_file", "output_folder", "output_image", "lock_folder", "release_locks"]
+__all__ = ["check_path", "output_file", "output_folder", "output_image", "lock_folder", "release_locks"]
 
 #: locked output folders of the running command: real path -> the open descriptor holding it
 _LOCKS: dict[str, int] = {}
@@ -65,6 +65,13 @@ def _path(path: str | os.PathLike, option: str) -> Path:
         raise ValueError(f"{option} {text[:200]!r}: not a usable path "
                          f"({getattr(exc, 'strerror', None) or exc})") from None
     return p
+
+
+def check_path(path: str | os.PathLike, option: str) -> Path:
+    """``path`` as a Path, refused as :func:`output_folder` refuses it for its text (empty,
+    blank, a NUL character, a name the system cannot take), without making anything: for
+    commands that must refuse a bad path before they build an environment (and compile)."""
+    return _checked(lambda p, _: p, path, option)
 
 
 def _checked(make, path, option: str) -> Path:
