@@ -245,9 +245,9 @@ def _measure_and_close(cases: dict, rounds: int) -> tuple[dict, dict]:
 def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: int = 7,
                      ops: dict | None = None) -> list[dict]:
     """The vector environment per ball count, contact off and on, against 2 balls without
-    contact, on one thread: CPU us per env-step, its ratio, the same per integrator substep (contact
-    shortens the step), the operation-count ratio (``ops``, default :func:`operation_count`)
-    and the quotient of the last two (the target: within 1.3)."""
+    contact, on one thread: CPU us per env-step, its ratio, the same per integrator substep
+    (contact shortens the step), the operation-count ratio (``ops``, default
+    :func:`operation_count`) and the quotient of the last two (the target: within 1.3)."""
     ops = operation_count(ball_counts) if ops is None else ops
     rows = []
     for contact in (False, True):
@@ -279,10 +279,10 @@ def ball_count_table(ball_counts=(2, 3, 5, 8, 12), num_envs: int = 256, rounds: 
 
 def washer_row(num_envs: int = 256, rounds: int = 7, integrator: str | None = None) -> dict:
     """The washer against ``yoshida_odd`` at ``num_envs`` sub-environments, CPU time per
-    env-step on one thread (the target: <= 10x).  The washer runs the ``nominal`` preset (its balls start
-    where the scene puts them): the ``train`` preset draws each ball's angle over the whole
-    circle, which puts balls with contact into each other (every lane then takes the
-    all-pairs contact: :func:`abb_gym.physics.model._contacts`)."""
+    env-step on one thread (the target: <= 10x).  The washer runs the ``nominal`` preset (its
+    balls start where the scene puts them): the ``train`` preset draws each ball's angle over
+    the whole circle, which puts balls with contact into each other (every lane then takes
+    the all-pairs contact: :func:`abb_gym.physics.model._contacts`)."""
     kw = {} if integrator is None else {"integrator": integrator}
     cases = {"washer": _Case(_env("washer", num_envs, preset="nominal", **kw), threads=1),
              "yoshida_odd": _Case(_env("yoshida_odd", num_envs), threads=1)}

@@ -21,7 +21,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["check_path", "output_file", "output_folder", "output_image", "lock_folder", "release_locks"]
+__all__ = ["check_path", "output_file", "output_folder", "output_image", "lock_folder",
+           "release_locks"]
 
 #: locked output folders of the running command: real path -> the open descriptor holding it
 _LOCKS: dict[str, int] = {}

@@ -2,10 +2,11 @@
 
 The equations of motion need sin and cos of the rotor and ball angles and tanh of the smoothed
 rolling resistance at every right-hand side, and with extended effects the sine and cosine of
-each touching pair's half gap and the log and power of the fluid drag's c_d(Re) law.  Calls into the C library block LLVM's loop
-vectoriser, so the compiled kernels evaluate them with the branch-free polynomials below
-(argument reduction plus the fdlibm minimax polynomials), which vectorise across environments
-and give the same result in every path (single environment, vector environment, ``simulate``).
+each touching pair's half gap and the log and power of the fluid drag's c_d(Re) law.  Calls
+into the C library block LLVM's loop vectoriser, so the compiled kernels evaluate them with
+the branch-free polynomials below (argument reduction plus the fdlibm minimax polynomials),
+which vectorise across environments and give the same result in every path (single
+environment, vector environment, ``simulate``).
 The power of two that scales the exponential is built from its exponent bits (a bit
 reinterpretation, :func:`_to_bits` / :func:`_from_bits`, which vectorises) rather than by ten
 comparisons, and the exponential's series is evaluated partly by Estrin's scheme: a shorter
@@ -65,8 +66,8 @@ from .._numba import njit
 _llvm.set_option("abb_gym", "-unroll-threshold=2000")
 _llvm.set_option("abb_gym", "-force-vector-interleave=2")
 
-__all__ = ["sincos", "exp_bounded", "log_positive", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32", "like",
-           "is_single"]
+__all__ = ["sincos", "exp_bounded", "log_positive", "tanh", "SINCOS_LIMIT", "SINCOS_LIMIT_F32",
+           "like", "is_single"]
 
 SINCOS_LIMIT = 1.6e6
 SINCOS_LIMIT_F32 = 1.0e3
