@@ -196,28 +196,15 @@ def test_the_reach_angle_bounds_every_pair():
 
 
 @njit
-def _rates(s, p, b, nb, reach):
+def _rates(s, p, b, nb):
     L = s.shape[1]
     out = np.zeros((nb, L))
     for l in range(L):
         for i in range(nb):
             out[i, l] = contact.contact_rate_lane(s, l, i, b, mdl.B_RADIUS, mdl.B_MEFF,
                                                   p[mdl.P_R, l], p[mdl.P_KC, l],
-                                                  p[mdl.P_ZC, l], reach)
+                                                  p[mdl.P_ZC, l])
     return out
-
-
-def test_the_contact_rates_of_the_step_rule_ask_the_neighbours_for_the_same_bits():
-    scene = load_scene("washer")
-    rng = np.random.default_rng(9)
-    angles, speeds = _clustered(scene, rng, 200, squeeze=0.3)
-    angles[:30] = np.sort(rng.uniform(-3, 3, (30, 12)))[:, ::-1]  # not in race order
-    angles[30:40] = 0.0  # the step rule's state: every ball at one place
-    s, p, b = _lanes(scene, angles, speeds)
-    neighbours = _rates(s, p, b, 12, p[mdl.P_REACH, 0])
-    every = _rates(s, p, b, 12, -1.0)
-    assert np.count_nonzero(every[:, 40:]) > 0.5 * every[:, 40:].size
-    assert np.array_equal(neighbours, every)
 
 
 @njit
@@ -231,17 +218,19 @@ def _rates_of_the_lanes(s, p, b, start):
     return out
 
 
-def test_the_contact_rates_of_a_lane_at_once_are_each_balls_bits():
+@pytest.mark.parametrize("seed", [9, 19])
+def test_the_contact_rates_of_the_step_rule_ask_the_neighbours_for_the_same_bits(seed):
     """The drag-rate pass asks each neighbour pair once per lane (add_contact_rates_lane);
     every ball's rate is the bits of asking it alone over every pair, in race order, out of
-    it and with every ball at one place, and it is added to what the row held."""
+    it and with every ball at one place (the step rule's state), and it is added to what the
+    row held."""
     scene = load_scene("washer")
-    rng = np.random.default_rng(19)
+    rng = np.random.default_rng(seed)
     angles, speeds = _clustered(scene, rng, 200, squeeze=0.3)
     angles[:30] = np.sort(rng.uniform(-3, 3, (30, 12)))[:, ::-1]  # not in race order
-    angles[30:40] = 0.0
+    angles[30:40] = 0.0  # the step rule's state: every ball at one place
     s, p, b = _lanes(scene, angles, speeds)
-    every = _rates(s, p, b, 12, -1.0)
+    every = _rates(s, p, b, 12)
     assert np.count_nonzero(every[:, 40:]) > 0.5 * every[:, 40:].size
     assert np.array_equal(_rates_of_the_lanes(s, p, b, 0.0), every)
     assert np.array_equal(_rates_of_the_lanes(s, p, b, 3.5), every + 3.5)

@@ -206,40 +206,27 @@ def add_contact_rates_lane(s, l, b, col_r, col_m, big_r, k, zeta, reach_angle, o
 
 
 @njit(cache=True)
-def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta, reach_angle=-1.0):
+def contact_rate_lane(s, l, i, b, col_r, col_m, big_r, k, zeta):
     """Bound on the contact eigenvalue magnitude of ball i of lane ``l`` [1/s] (0 if it
-    touches nothing).
+    touches nothing), asking every other ball.
 
     Gershgorin over the touching neighbours, omega^2 = sum_j k (1/m_i + 1/m_j), counting the
     two largest terms only: in a ring a ball has one neighbour on each side, and the state at
     which the step rule asks (all balls at ph = 0, :func:`abb_gym.physics.steps.stiff_rate`)
     would otherwise count every ball.  Overdamped contacts (zeta > 1/2) have a fast real root
-    up to 2 zeta omega.
-
-    With ``reach_angle`` (:func:`neighbour_reach_angle`) and four or more balls, only the
-    balls of adjacent index are asked where :func:`ring_holds` says that no other ball can
-    touch (the neighbour list of :func:`abb_gym.physics.model._contacts`): the same two
-    terms, so the same bits, as asking every ball."""
+    up to 2 zeta omega.  Where the neighbour list holds, :func:`add_contact_rates_lane` asks
+    the neighbours only, for the same bits."""
     n = b.shape[0]
     first = 0.0
     second = 0.0
-    if reach_angle >= 0.0 and n >= 4 and ring_holds(s, l, n, reach_angle):
-        for j in (n - 1 if i == 0 else i - 1, 0 if i == n - 1 else i + 1):
+    for j in range(n):
+        if j != i:
             w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
             if w2 > first:
                 second = first
                 first = w2
             elif w2 > second:
                 second = w2
-    else:
-        for j in range(n):
-            if j != i:
-                w2 = _pair_rate2(s, l, i, j, b, col_r, col_m, big_r, k)
-                if w2 > first:
-                    second = first
-                    first = w2
-                elif w2 > second:
-                    second = w2
     if first == 0.0:
         return 0.0
     return math.sqrt(first + second) * max(1.0, 2.0 * zeta)
