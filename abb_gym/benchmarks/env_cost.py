@@ -74,8 +74,8 @@ class _Case:
     Whole episodes, because an env-step's cost follows the episode: the step rule shortens
     the integrator's step as the rotor speeds up (the rolling resistance's slope grows with
     the speed squared), and the sub-environments of a benchmark start their episodes
-    together.  ``yoshida_odd`` at 256 sub-environments cost 0.24-1.5 us per env-step from one
-    quarter-second burst to the next in one process when the bursts cut episodes anywhere."""
+    together, so a burst that cut episodes anywhere would do a different share of cheap and
+    dear steps than the next."""
 
     def __init__(self, env, threads: int | None = None, seed: int = 0):
         self.env = env
@@ -356,7 +356,7 @@ class _CartPole:
                                 vectorization_mode="vector_entry_point")
         self.env.reset(seed=0)
         self.n = num_envs
-        self.acts = np.random.default_rng(0).integers(0, 2, size=(64, num_envs))
+        self.actions = np.random.default_rng(0).integers(0, 2, size=(64, num_envs))
         self.k = 0
         self.steps_per_burst = EPISODE_STEPS
         self.threads = None
@@ -372,7 +372,6 @@ def cartpole_row(num_envs: int = 1024, rounds: int = 7) -> dict:
     """``yoshida_odd`` at ``num_envs`` on one thread against ``CartPoleVectorEnv`` per
     env-step, CPU time (the target: <= 8x)."""
     cp = _CartPole(num_envs)
-    cp.actions = cp.acts
     cases = {"abb": _Case(_env("yoshida_odd", num_envs), threads=1), "cartpole": cp}
     try:
         res = interleaved(cases, rounds)
