@@ -1,6 +1,11 @@
 """``abb-gym bench``: ``accuracy`` draws the work-precision chart of every integrator (PNG +
 Markdown table + CSV) and the energy drift of long undamped runs; ``speed`` measures
-throughput."""
+throughput; ``time-to-target`` times training runs to a target held-out return.
+
+    abb-gym bench time-to-target --target runup_speed_yoshida_odd \\
+        --run "shipped config=runs/a/s0" --run "shipped config=runs/a/s1" \\
+        --run "tuned=runs/b/s0" --run "tuned=runs/b/s1" --out out/ttt
+"""
 from __future__ import annotations
 
 import csv
@@ -29,6 +34,31 @@ def register(sub) -> None:
                      help="also write the generated section of this page (docs/performance.md: "
                           "between its bench-costs markers; the rest stays as written)")
     spd.set_defaults(func=run_speed)
+    ttt = bsub.add_parser("time-to-target",
+                          help="training time of runs to a target held-out return (table, chart)",
+                          description="Training time of runs to a target held-out return: per "
+                                      "run and per config (the median of its seeds), with a "
+                                      "chart of return against training time.  See "
+                                      "abb_gym.benchmarks.time_to_target for the rule.")
+    ttt.add_argument("--run", action="append", default=[], metavar="LABEL=FOLDER",
+                     help="a run folder of abb-gym train (or an agent's folder) and its config's "
+                          "label; repeat a label for the seeds of one config (the first label "
+                          "is the reference)")
+    ttt.add_argument("--target", default=None, metavar="AGENT",
+                     help="the target is this agent's final held-out return (a shipped agent's "
+                          "name or a folder: its evaluation.json)")
+    ttt.add_argument("--target-return", type=float, default=None, metavar="R",
+                     help="the target as a number instead of --target")
+    ttt.add_argument("--tolerance", type=float, default=None,
+                     help="reached at a return of at least target - tolerance * |target| "
+                          "(default 0.02: abb_gym.benchmarks.time_to_target)")
+    ttt.add_argument("--title", default=None, help="heading (default: the target's name)")
+    ttt.add_argument("--out", default="out/bench", help="folder for time_to_target.md and .png")
+    ttt.add_argument("--docs", default=None, metavar="PAGE",
+                     help="also write the section between this page's "
+                          "'<!-- time-to-target:TITLE:begin -->' and ':end -->' markers, with "
+                          "the chart beside the page")
+    ttt.set_defaults(func=run_time_to_target)
 
 
 def _write_csv(rows, path: Path) -> None:
@@ -87,4 +117,58 @@ def run_speed(args) -> int:
     if args.docs:
         write_docs_section(args.docs, rows, COLUMNS)
         print(f"wrote the generated section of {args.docs}")
+    return 0
+
+
+def _run_option(text: str) -> tuple[str, Path]:
+    label, sep, folder = text.partition("=")
+    if not sep or not label.strip() or not folder.strip():
+        raise ValueError(f"--run {text!r}: expected LABEL=FOLDER (e.g. 'tuned=runs/b/s0')")
+    return label.strip(), Path(folder.strip())
+
+
+def run_time_to_target(args) -> int:
+    import math
+    import re
+
+    from ..benchmarks.time_to_target import (DEFAULT_TOLERANCE, TargetGroup, final_return,
+                                             plot_time_to_target, read_curve, section)
+    if not args.run:
+        raise ValueError("--run: give at least one LABEL=FOLDER")
+    runs = [_run_option(text) for text in args.run]
+    if (args.target is None) == (args.target_return is None):
+        raise ValueError("give one of --target AGENT and --target-return R")
+    tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
+    if not (0.0 <= tolerance < 1.0):
+        raise ValueError(f"--tolerance must be in [0, 1) (got {tolerance})")
+    if args.target_return is not None and not math.isfinite(args.target_return):
+        raise ValueError(f"--target-return must be a finite number (got {args.target_return})")
+    docs = Path(args.docs) if args.docs else None
+    if docs is not None and not docs.is_file():
+        raise ValueError(f"--docs {docs}: no such page")
+    curves = [read_curve(folder, label) for label, folder in runs]
+    if args.target is not None:
+        from ..rl.agent import resolve_agent_path
+        folder = resolve_agent_path(args.target)
+        target, source = final_return(folder), f"the final evaluation of `{folder.name}`"
+        title = args.title or folder.name
+    else:
+        target, source = float(args.target_return), "given"
+        title = args.title or "time to target"
+    out = output_folder(args.out, "--out")
+    slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", title)
+    png = plot_time_to_target([TargetGroup(title, curves, target, tolerance)],
+                              out / f"time_to_target_{slug}.png")
+    text = section(title, curves, target, source, tolerance, png.name)
+    write_text(out / f"time_to_target_{slug}.md", text)
+    print(text)
+    print(f"wrote {out / f'time_to_target_{slug}.md'} and {png}")
+    if docs is not None:
+        import shutil
+
+        from ..evaluation.results_pages import replace_between_markers
+        shutil.copyfile(png, docs.parent / png.name)
+        replace_between_markers(docs, text.strip(), (f"<!-- time-to-target:{title}:begin -->",
+                                                     f"<!-- time-to-target:{title}:end -->"))
+        print(f"wrote the {title} section of {docs} and {docs.parent / png.name}")
     return 0

@@ -145,8 +145,11 @@ def _make_eval_callback_class():
                                               self.meta, self.episodes, self.seed)
             self.seconds += time.perf_counter() - start
             means = brief(summary)
+            # eval_time_s: the evaluations' own share of wall_time_s so far (so that a
+            # time-to-target counts the training, not how often it was measured)
             row = {"timesteps": self.num_timesteps,
-                   "wall_time_s": round(time.perf_counter() - self.t0, 2)}
+                   "wall_time_s": round(time.perf_counter() - self.t0, 2),
+                   "eval_time_s": round(self.seconds, 2)}
             for k in KEY_METRICS:
                 row[k] = means[k]
                 row[k + "_ci_low"] = summary[k]["ci_low"]
