@@ -385,3 +385,34 @@ def test_drive_classes_evaluate_the_kernel_drive_law():
     assert np.allclose(motor.torque_at(times, speeds, scene), want, rtol=1e-12, atol=1e-15)
     assert np.array_equal(motor.torque_at(times, speeds, scene),
                           dl.motor_torques(times, speeds, rows))
+
+
+@pytest.mark.parametrize("name,motor", [("washer", True), ("washer", False),
+                                        ("yoshida_odd5", True)])
+def test_the_sums_ball_by_ball_are_the_sums_in_one_lane_loop(monkeypatch, name, motor):
+    """From :data:`~abb_gym.physics.model.SUMMED_BALLS` balls the split passes add each ball to
+    the rotor's sums in a lane loop of its own (``_sum_pass``, which vectorises); below it one
+    lane loop adds every ball.  Both add the same terms in the same order, so the derivatives
+    agree bit for bit: the right-hand side compiled anew with the threshold out of reach
+    against the shipped one, on 7 lanes of states spread around the run's start (washer:
+    contact, fluid drag, friction and gravity on)."""
+    from numba import njit
+    scene, p, b, s0, t_out, seg_t, seg_d, h = _run_case(name, motor)
+    nb = scene.ball_count
+    assert nb >= mdl.SUMMED_BALLS
+    spec = mdl.spec_of(p, seg_d)
+    lanes = 7
+    rng = np.random.default_rng(3)
+    s = s0[:, None] + rng.normal(0.0, 1.0, (s0.size, lanes)) * np.where(
+        np.arange(s0.size) < s0.size // 2, 0.05, 2.0)[:, None]
+    s[:2] = rng.normal(0.0, 1e-4, (2, lanes))  # rotor x, y [m]
+    args = (np.linspace(0.0, 0.3, lanes), s, np.repeat(p[:, None], lanes, 1),
+            np.repeat(b[:, :, None], lanes, 2), np.repeat(seg_d[0][:, None], lanes, 1))
+    shipped = np.zeros_like(s)
+    mdl.accelerations_block(*args, shipped, mdl.make_work(nb, lanes), nb, spec)
+    monkeypatch.setattr(mdl, "SUMMED_BALLS", 10 ** 6)  # read when the copy compiles
+    in_one_loop = njit(error_model="numpy", noalias=True)(mdl.accelerations_block.py_func)
+    rows = np.zeros_like(s)
+    in_one_loop(*args, rows, mdl.make_work(nb, lanes), nb, spec)
+    assert np.all(np.isfinite(shipped))
+    assert np.array_equal(shipped, rows)

@@ -148,6 +148,11 @@ W_COLX, W_COLY, W_CI, W_JT, W_SX, W_CY, W_FX, W_FY, W_FTH = range(6, 15)
 # lane's neighbour list is exact (1) or it takes every pair (0) (:func:`_contacts`)
 W_PQ, W_PN, W_RING = 15, 16, 17
 WORK_COLUMNS = 18
+# after the contact forces are in ds, the columns W_QC, W_NC, W_PQ, W_PN and W_RING of balls
+# 0-3 hold the 18 running sums of the rotor's rows (Sx, Cy, Jt, the three forces, the twelve
+# Schur sums) while the split passes of accelerations_block add the balls one at a time
+# (_sum_pass); sum k is in ball k // 5, column _SUM_COLUMNS[k % 5]
+_SUM_COLUMNS = (W_QC, W_NC, W_PQ, W_PN, W_RING)
 # kernel specialisation: which terms exist (compile-time constants of the vector kernels)
 SPEC_EXT = 1       # an extended effect (gravity, contact, fluid drag, virtual mass, friction)
 SPEC_ECC = 2       # race eccentricity
@@ -733,6 +738,43 @@ def _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor):
     ds[nq + 2, l] = ath
 
 
+@njit(cache=True, error_model="numpy", noalias=True)
+def _sum_start(t, s, p, d, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14,
+               a15, a16, a17, nq, spec):
+    """The 18 sums of every lane at their rotor values (:func:`_rotor_start`), into the rows
+    ``a0`` .. ``a17`` (no two overlap: compiled ``noalias``, as :func:`_ball_pass`)."""
+    motor = (spec & SPEC_MOTOR) != 0
+    envelope = (spec & SPEC_ENVELOPE) != 0
+    for l in range(lanes_of(s, spec)):
+        acc, _ = _rotor_start(t, s, p, d, l, nq, motor, envelope)
+        (a0[l], a1[l], a2[l], a3[l], a4[l], a5[l], a6[l], a7[l], a8[l], a9[l], a10[l], a11[l],
+         a12[l], a13[l], a14[l], a15[l], a16[l], a17[l]) = acc
+
+
+@njit(cache=True, error_model="numpy", noalias=True)
+def _sum_pass(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14, a15, a16, a17,
+              colx, coly, ci, jt, sx, cy, fx, fy, fth, fi, bx, by, bth, inv, spec):
+    """One ball's terms (the rows :func:`_ball_pass` wrote) added to the 18 sums of every
+    lane (:func:`_add_ball`: the same operations in the same order as the lane loop of the
+    fused path, so the same bits).  A lane loop over rows that are each an argument of their
+    own: with the ball loop inside the lane loop, LLVM vectorised that loop up to about five
+    balls and left it scalar beyond."""
+    motor = (spec & SPEC_MOTOR) != 0
+    for l in range(1 if (spec & SPEC_ONE_LANE) != 0 else inv.shape[0]):  # lanes_of
+        acc = (a0[l], a1[l], a2[l], a3[l], a4[l], a5[l], a6[l], a7[l], a8[l], a9[l], a10[l],
+               a11[l], a12[l], a13[l], a14[l], a15[l], a16[l], a17[l])
+        terms = (colx[l], coly[l], ci[l], jt[l], sx[l], cy[l], fx[l], fy[l], fth[l], fi[l],
+                 bx[l], by[l], bth[l])
+        (a0[l], a1[l], a2[l], a3[l], a4[l], a5[l], a6[l], a7[l], a8[l], a9[l], a10[l], a11[l],
+         a12[l], a13[l], a14[l], a15[l], a16[l], a17[l]) = _add_ball(acc, terms, inv[l], motor)
+
+
+#: ball counts from which the split passes add the balls to the rotor's sums one ball at a
+#: time, each a lane loop (:func:`_sum_pass`), rather than in one lane loop around the ball
+#: loop; the sums then live in free columns of balls 0-3 (``_SUM_COLUMNS``), so this needs at
+#: least four balls
+SUMMED_BALLS = 4
+
 #: ball counts up to which the right-hand side is one lane loop around the ball loop (LLVM
 #: unrolls the ball loop whole and vectorises the lane loop); more balls take the split
 #: passes of :func:`accelerations_block`.  At 3 balls the split passes were faster (the
@@ -805,6 +847,27 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
         _ball_pass(t, s, p, b, d, ds, wi[W_FI], wi[W_BX], wi[W_BY], wi[W_BTH], wi[W_COLX],
                    wi[W_COLY], wi[W_CI], wi[W_JT], wi[W_SX], wi[W_CY], wi[W_FX], wi[W_FY],
                    wi[W_FTH], i, nq, spec)
+    if nb >= SUMMED_BALLS:
+        w0, w1, w2, w3 = work[0], work[1], work[2], work[3]
+        c0, c1, c2, c3, c4 = _SUM_COLUMNS
+        _sum_start(t, s, p, d, w0[c0], w0[c1], w0[c2], w0[c3], w0[c4], w1[c0], w1[c1], w1[c2],
+                   w1[c3], w1[c4], w2[c0], w2[c1], w2[c2], w2[c3], w2[c4], w3[c0], w3[c1],
+                   w3[c2], nq, spec)
+        for i in range(nb):
+            wi = work[i]
+            _sum_pass(w0[c0], w0[c1], w0[c2], w0[c3], w0[c4], w1[c0], w1[c1], w1[c2], w1[c3],
+                      w1[c4], w2[c0], w2[c1], w2[c2], w2[c3], w2[c4], w3[c0], w3[c1], w3[c2],
+                      wi[W_COLX], wi[W_COLY], wi[W_CI], wi[W_JT], wi[W_SX], wi[W_CY],
+                      wi[W_FX], wi[W_FY], wi[W_FTH], wi[W_FI], wi[W_BX], wi[W_BY],
+                      wi[W_BTH], b[i, B_INV], spec)
+        for l in range(L):
+            _, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
+            acc = (w0[c0, l], w0[c1, l], w0[c2, l], w0[c3, l], w0[c4, l], w1[c0, l], w1[c1, l],
+                   w1[c2, l], w1[c3, l], w1[c4, l], w2[c0, l], w2[c1, l], w2[c2, l],
+                   w2[c3, l], w2[c4, l], w3[c0, l], w3[c1, l], w3[c2, l])
+            ax, ay, ath = _solve_rotor(acc, lane, p, l, gravity, motor)
+            _write_lane(s, b, ds, work, l, nb, nq, lane, ax, ay, ath, motor)
+        return
     for l in range(L):
         acc, lane = _rotor_start(t, s, p, d, l, nq, motor, envelope)
         for i in range(nb):
