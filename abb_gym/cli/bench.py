@@ -127,6 +127,22 @@ def _run_option(text: str) -> tuple[str, Path]:
     return label.strip(), Path(folder.strip())
 
 
+def _command(args) -> str:
+    """The command line that makes this section again (its options as given)."""
+    import shlex
+    parts = ["abb-gym", "bench", "time-to-target"]
+    if args.target is not None:
+        parts += ["--target", args.target]
+    else:
+        parts += ["--target-return", repr(args.target_return)]
+    for option in ("tolerance", "title"):
+        if getattr(args, option) is not None:
+            parts += [f"--{option}", str(getattr(args, option))]
+    for run in args.run:
+        parts += ["--run", run]
+    return shlex.join(parts)
+
+
 def run_time_to_target(args) -> int:
     import math
     import re
@@ -159,7 +175,7 @@ def run_time_to_target(args) -> int:
     slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", title)
     png = plot_time_to_target([TargetGroup(title, curves, target, tolerance)],
                               out / f"time_to_target_{slug}.png")
-    text = section(title, curves, target, source, tolerance, png.name)
+    text = section(title, curves, target, source, tolerance, png.name, _command(args))
     write_text(out / f"time_to_target_{slug}.md", text)
     print(text)
     print(f"wrote {out / f'time_to_target_{slug}.md'} and {png}")

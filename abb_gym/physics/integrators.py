@@ -219,15 +219,24 @@ def _etdrk4_step(t, h, s, p, b, d, k, tmp, tt, work, lam, coef, active, nb, spec
     nu, na, nbb, nc = k[0], k[1], k[2], k[3]
     a = k[4]
     mdl.drag_rates_block(t, s, p, b, d, lam, nb, spec)
+    # only the balls' relative speeds relax (drag_rates_block leaves every other row 0): the
+    # other rows take the weights at z = -0.0, computed once (the same bits as per lane)
+    first = n // 2 + 3
+    rk = etd_coefficients(-0.0)
     for j in range(n):
-        for l in range(L):
-            e2, e, q, f1, f2, f3 = etd_coefficients(-h[l] * lam[j, l])
-            coef[0, j, l] = e2
-            coef[1, j, l] = e
-            coef[2, j, l] = q
-            coef[3, j, l] = f1
-            coef[4, j, l] = f2
-            coef[5, j, l] = f3
+        if first <= j < first + nb:
+            for l in range(L):
+                e2, e, q, f1, f2, f3 = etd_coefficients(-h[l] * lam[j, l])
+                coef[0, j, l] = e2
+                coef[1, j, l] = e
+                coef[2, j, l] = q
+                coef[3, j, l] = f1
+                coef[4, j, l] = f2
+                coef[5, j, l] = f3
+        else:
+            for c in range(6):
+                for l in range(L):
+                    coef[c, j, l] = rk[c]
     mdl.accelerations_block(t, s, p, b, d, nu, work, nb, spec)
     for j in range(n):
         for l in range(L):

@@ -807,11 +807,14 @@ def accelerations_block(t, s, p, b, d, ds, work, nb, spec):
     more balls LLVM unrolled it no longer, and the lane loop stayed scalar (``yoshida_odd``'s
     right-hand side at 128 lanes: 42-52 ns per lane at 2-3 balls, 290 at 4, 580-960 at 5-12:
     the "vectorisation cliff"); they take split passes, each a lane loop: per ball its terms
-    (:func:`_ball_pass`, kept in ``work``), then per lane the sums in ball order, the solve
-    and the derivatives.  Each pass reads arrays that it does not write, so its lane loop
-    needs no overlap checks.  The split passes cost two balls 15 % more (the terms go through
-    memory), hence the fused loop where it vectorises.  Each lane's operations and their
-    order are the same either way, so the results are the same bits."""
+    (:func:`_ball_pass`, kept in ``work``), then the sums in ball order, the solve and the
+    derivatives.  From :data:`SUMMED_BALLS` balls the sums are a lane loop per ball too
+    (:func:`_sum_pass`): one lane loop around the ball loop stayed scalar beyond about five
+    balls, as the fused loop does beyond two.  Each pass reads arrays that it does not
+    write, so its lane loop needs no overlap checks.  The split passes cost two balls 15 %
+    more (the terms go through memory), hence the fused loop where it vectorises.  Each
+    lane's operations and their order are the same either way, so the results are the same
+    bits."""
     L = lanes_of(s, spec)
     nq = 3 + nb
     ext = (spec & SPEC_EXT) != 0
@@ -977,6 +980,47 @@ def total_energy(s, p, b):
 
 
 @njit(cache=True, error_model="numpy", noalias=True)
+def _drag_rate_pass(t, s, p, b, d, out, i, nq, spec):
+    """Ball ``i``'s relaxation rate [1/s] in every lane (:func:`drag_rates_block`), into the
+    row ``out``: a lane loop per ball, the ball's row an argument of its own (compiled
+    ``noalias``, as :func:`_ball_pass`), so that the lane loop vectorises; a lane loop around
+    the ball loop stayed scalar."""
+    ext = (spec & SPEC_EXT) != 0
+    roll = (spec & SPEC_ROLL) != 0
+    motor = (spec & SPEC_MOTOR) != 0
+    for l in range(lanes_of(s, spec)):
+        if motor:
+            th = s[2, l]
+            w = s[nq + 2, l]
+        else:
+            th, w, _ = dl.prescribed_law(t[l] - d[dl.D_T0, l], d[dl.D_TH0, l], d[dl.D_W0, l],
+                                         d[dl.D_ALPHA, l])
+        big_r = p[P_R, l]
+        m = b[i, B_MASS, l]
+        rate = b[i, B_BETA, l]
+        dph = s[nq + 3 + i, l]
+        if roll:
+            tnh = el.tanh(big_r * dph / p[P_UREG, l])
+            rate += (b[i, B_MUR, l] * m * big_r ** 3 * (w + dph) ** 2 * (1.0 - tnh * tnh)
+                     / p[P_UREG, l])
+        if ext:
+            if (spec & SPEC_DRAG) != 0 and p[P_DLAW, l] != 0.0:
+                drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
+                                                b[i, B_KQUAD, l], b[i, B_REU, l],
+                                                p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
+                                                p[P_CD3, l], p[P_CDINF, l])
+                rate += big_r * big_r * slope
+            if (spec & SPEC_FRICTION) != 0 and p[P_FRIC, l] != 0.0:
+                normal = m * big_r * (w + dph) ** 2
+                if p[P_GRAV, l] != 0.0:
+                    sp, cp = el.sincos(th + s[3 + i, l])
+                    normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
+                rate += big_r * big_r * abs(normal) * friction_secant(
+                    big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
+        out[l] = rate / b[i, B_II, l]
+
+
+@njit(cache=True, error_model="numpy", noalias=True)
 def drag_rates_block(t, s, p, b, d, lam, nb, spec):
     """Relaxation rates [1/s] of the ball relative speeds, written into ``lam`` (state rows x
     lanes; every other row 0): for ball i, lam[ph_i'] = (beta_i + d(resisting force) /
@@ -998,47 +1042,16 @@ def drag_rates_block(t, s, p, b, d, lam, nb, spec):
     of relative size m_i / M, is left out); the exponential integrator treats it exactly and
     the step-size rule of the explicit methods bounds h * lam.  Lanes, and arrays that must
     not overlap, as in :func:`accelerations_block`."""
-    L = lanes_of(s, spec)
     nq = 3 + nb
-    ext = (spec & SPEC_EXT) != 0
-    roll = (spec & SPEC_ROLL) != 0
-    motor = (spec & SPEC_MOTOR) != 0
-    for l in range(L):
-        if motor:
-            th = s[2, l]
-            w = s[nq + 2, l]
-        else:
-            th, w, _ = dl.prescribed_law(t[l] - d[dl.D_T0, l], d[dl.D_TH0, l], d[dl.D_W0, l],
-                                         d[dl.D_ALPHA, l])
-        for j in range(2 * nq):
+    for j in range(2 * nq):
+        for l in range(lanes_of(s, spec)):
             lam[j, l] = 0.0
-        big_r = p[P_R, l]
-        for i in range(nb):
-            m = b[i, B_MASS, l]
-            rate = b[i, B_BETA, l]
-            dph = s[nq + 3 + i, l]
-            if roll:
-                tnh = el.tanh(big_r * dph / p[P_UREG, l])
-                rate += (b[i, B_MUR, l] * m * big_r ** 3 * (w + dph) ** 2 * (1.0 - tnh * tnh)
-                         / p[P_UREG, l])
-            if ext:
-                if (spec & SPEC_DRAG) != 0 and p[P_DLAW, l] != 0.0:
-                    drag, slope = _fluids.race_drag(big_r * dph, p[P_DLAW, l], b[i, B_KLIN, l],
-                                                    b[i, B_KQUAD, l], b[i, B_REU, l],
-                                                    p[P_CD0, l], p[P_CD1, l], p[P_CD2, l],
-                                                    p[P_CD3, l], p[P_CDINF, l])
-                    rate += big_r * big_r * slope
-                if (spec & SPEC_FRICTION) != 0 and p[P_FRIC, l] != 0.0:
-                    normal = m * big_r * (w + dph) ** 2
-                    if p[P_GRAV, l] != 0.0:
-                        sp, cp = el.sincos(th + s[3 + i, l])
-                        normal += m * (p[P_GX, l] * cp + p[P_GY, l] * sp)
-                    rate += big_r * big_r * abs(normal) * friction_secant(
-                        big_r * dph, p[P_MUK, l], p[P_MUS, l], p[P_UFR, l], p[P_USTR, l])
-            lam[nq + 3 + i, l] = rate / b[i, B_II, l]
+    for i in range(nb):
+        _drag_rate_pass(t, s, p, b, d, lam[nq + 3 + i], i, nq, spec)
+    ext = (spec & SPEC_EXT) != 0
     if ext and (spec & SPEC_CONTACT) != 0:
-        # a lane loop of its own: the loop above, without it, has no branches and no calls
-        for l in range(L):
+        # a lane loop of its own: the ball passes, without it, have no branches and no calls
+        for l in range(lanes_of(s, spec)):
             if p[P_KC, l] != 0.0:
                 _contact.add_contact_rates_lane(s, l, b, B_RADIUS, B_MEFF, p[P_R, l],
                                                 p[P_KC, l], p[P_ZC, l], p[P_REACH, l], lam,
