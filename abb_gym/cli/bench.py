@@ -149,6 +149,8 @@ def run_time_to_target(args) -> int:
 
     from ..benchmarks.time_to_target import (DEFAULT_TOLERANCE, TargetGroup, final_return,
                                              plot_time_to_target, read_curve, section)
+    from .outputs import check_path
+    check_path(args.out, "--out")  # before any file is read
     if not args.run:
         raise ValueError("--run: give at least one LABEL=FOLDER")
     runs = [_run_option(text) for text in args.run]
