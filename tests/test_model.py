@@ -387,32 +387,47 @@ def test_drive_classes_evaluate_the_kernel_drive_law():
                           dl.motor_torques(times, speeds, rows))
 
 
-@pytest.mark.parametrize("name,motor", [("washer", True), ("washer", False),
-                                        ("yoshida_odd5", True)])
-def test_the_sums_ball_by_ball_are_the_sums_in_one_lane_loop(monkeypatch, name, motor):
-    """From :data:`~abb_gym.physics.model.SUMMED_BALLS` balls the split passes add each ball to
-    the rotor's sums in a lane loop of its own (``_sum_pass``, which vectorises); below it one
-    lane loop adds every ball.  Both add the same terms in the same order, so the derivatives
-    agree bit for bit: the right-hand side compiled anew with the threshold out of reach
-    against the shipped one, on 7 lanes of states spread around the run's start (washer:
-    contact, fluid drag, friction and gravity on)."""
-    from numba import njit
+def _lanes_case(name, motor, lanes=7):
+    """Right-hand-side inputs of ``lanes`` lanes of states spread around the run's start."""
     scene, p, b, s0, t_out, seg_t, seg_d, h = _run_case(name, motor)
-    nb = scene.ball_count
-    assert nb >= mdl.SUMMED_BALLS
-    spec = mdl.spec_of(p, seg_d)
-    lanes = 7
     rng = np.random.default_rng(3)
     s = s0[:, None] + rng.normal(0.0, 1.0, (s0.size, lanes)) * np.where(
         np.arange(s0.size) < s0.size // 2, 0.05, 2.0)[:, None]
     s[:2] = rng.normal(0.0, 1e-4, (2, lanes))  # rotor x, y [m]
     args = (np.linspace(0.0, 0.3, lanes), s, np.repeat(p[:, None], lanes, 1),
             np.repeat(b[:, :, None], lanes, 2), np.repeat(seg_d[0][:, None], lanes, 1))
-    shipped = np.zeros_like(s)
-    mdl.accelerations_block(*args, shipped, mdl.make_work(nb, lanes), nb, spec)
-    monkeypatch.setattr(mdl, "SUMMED_BALLS", 10 ** 6)  # read when the copy compiles
-    in_one_loop = njit(error_model="numpy", noalias=True)(mdl.accelerations_block.py_func)
-    rows = np.zeros_like(s)
-    in_one_loop(*args, rows, mdl.make_work(nb, lanes), nb, spec)
+    return args, scene.ball_count, mdl.spec_of(p, seg_d)
+
+
+@pytest.fixture(scope="module")
+def sums_in_one_loop():
+    """The right-hand side compiled anew with :data:`~abb_gym.physics.model.SUMMED_BALLS` out
+    of reach, so that one lane loop adds every ball to the rotor's sums (numba reads the
+    global when it compiles: once here, for the argument types every case shares)."""
+    from numba import njit
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(mdl, "SUMMED_BALLS", 10 ** 6)
+        rhs = njit(error_model="numpy", noalias=True)(mdl.accelerations_block.py_func)
+        args, nb, spec = _lanes_case("yoshida_odd5", True, lanes=1)
+        rhs(*args, np.zeros_like(args[1]), mdl.make_work(nb, 1), nb, spec)
+    return rhs
+
+
+@pytest.mark.parametrize("name,motor", [("washer", True), ("washer", False),
+                                        ("yoshida_odd5", True)])
+def test_the_sums_ball_by_ball_are_the_sums_in_one_lane_loop(sums_in_one_loop, name, motor):
+    """From :data:`~abb_gym.physics.model.SUMMED_BALLS` balls the split passes add each ball to
+    the rotor's sums in a lane loop of its own (``_sum_pass``, which vectorises); below it one
+    lane loop adds every ball.  Both add the same terms in the same order, so the derivatives
+    agree bit for bit: the shipped right-hand side against one compiled with the threshold
+    out of reach, on 7 lanes of states spread around the run's start (washer: contact, fluid
+    drag, friction and gravity on)."""
+    args, nb, spec = _lanes_case(name, motor)
+    assert nb >= mdl.SUMMED_BALLS
+    shipped = np.zeros_like(args[1])
+    mdl.accelerations_block(*args, shipped, mdl.make_work(nb, 7), nb, spec)
+    rows = np.zeros_like(args[1])
+    sums_in_one_loop(*args, rows, mdl.make_work(nb, 7), nb, spec)
+    assert len(sums_in_one_loop.signatures) == 1  # compiled once, with the threshold patched
     assert np.all(np.isfinite(shipped))
     assert np.array_equal(shipped, rows)
