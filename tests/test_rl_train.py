@@ -270,13 +270,17 @@ def test_config_keys_of_mixed_types_and_reserved_env_keywords_are_one_error(tmp_
 
 
 def test_the_training_share_benchmark_times_the_environment_and_puts_it_back():
+    from stable_baselines3 import PPO
+
     from abb_gym.benchmarks.training_share import training_share
     from abb_gym.rl.vec_env import NativeVecEnv
-    before = (NativeVecEnv.step_wait, NativeVecEnv.reset)
+    before = (NativeVecEnv.step_wait, NativeVecEnv.reset, PPO.train)
     r = training_share("runup_speed_yoshida_odd_varied", steps=1024)
     assert r["env_steps"] >= 1024
     assert 0.0 < r["env_s"] < r["learn_s"] and 0.0 < r["env_share"] < 1.0
-    assert (NativeVecEnv.step_wait, NativeVecEnv.reset) == before
+    assert 0.0 < r["update_s"] < r["learn_s"] and 0.0 < r["update_share"] < 1.0
+    assert r["env_share"] + r["update_share"] < 1.0  # the two parts do not overlap
+    assert (NativeVecEnv.step_wait, NativeVecEnv.reset, PPO.train) == before
 
 
 def test_a_frame_stacked_agent_is_evaluated_at_its_own_control_interval(tmp_path, train_config):
