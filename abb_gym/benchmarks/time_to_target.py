@@ -12,7 +12,7 @@ The target is a return on the same test set (by default the reference agent's fi
 its ``evaluation.json``).  A run *reaches* it at its first evaluation whose mean return is at
 least ``target - tolerance * |target|``.  The default tolerance, 2 %, is the spread of a
 converged run's evaluations on that set: the last nine evaluations of the shipped
-``runup_speed_yoshida_odd`` run, whose return no longer rises, lie within 1.6 % of each other.
+``runup_speed_yoshida_odd`` run, whose return no longer rises, lie within 1.7 % of each other.
 A smaller tolerance would time the noise of one evaluation rather than the learning.
 
 Wall times are only comparable between runs that shared the machine's load: train the runs
