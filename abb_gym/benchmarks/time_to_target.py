@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["DEFAULT_TOLERANCE", "TrainingCurve", "TargetGroup", "read_curve", "final_return",
-           "first_reaching", "time_to_target_rows", "config_rows", "section",
+           "check_rule", "first_reaching", "time_to_target_rows", "config_rows", "section",
            "plot_time_to_target"]
 
 #: relative tolerance of "reached the target" (see the module docstring for why 2 %)
@@ -105,14 +105,23 @@ def final_return(folder: str | Path) -> float:
     return value
 
 
+def check_rule(target: float | None, tolerance: float, target_name: str = "target",
+               tolerance_name: str = "tolerance") -> None:
+    """ValueError, naming the field, unless ``target`` is a finite return (None: not known
+    yet, not checked) and ``tolerance`` a fraction in [0, 1); callers that read the values
+    from options pass the options' names."""
+    if target is not None and not math.isfinite(target):
+        raise ValueError(f"{target_name} must be a finite return (got {target})")
+    if not (0.0 <= tolerance < 1.0):
+        raise ValueError(f"{tolerance_name} must be in [0, 1) (a fraction of |target|; got "
+                         f"{tolerance})")
+
+
 def first_reaching(curve: TrainingCurve, target: float,
                    tolerance: float = DEFAULT_TOLERANCE) -> int | None:
     """Index of the first evaluation whose mean return is at least
     ``target - tolerance * |target|``; None if none is."""
-    if not (math.isfinite(target)):
-        raise ValueError(f"target must be a finite return (got {target})")
-    if not (0.0 <= tolerance < 1.0):
-        raise ValueError(f"tolerance must be in [0, 1) (a fraction of |target|; got {tolerance})")
+    check_rule(target, tolerance)
     hits = np.flatnonzero(curve.ret >= target - tolerance * abs(target))
     return int(hits[0]) if hits.size else None
 
@@ -132,8 +141,8 @@ def time_to_target_rows(curves: list[TrainingCurve], target: float,
                 "" if k is None else f"{c.wall_s[k]:.0f}",
             "final return [95 % CI]": f"{c.ret[-1]:.3f} [{c.ret_low[-1]:.3f}, "
                                       f"{c.ret_high[-1]:.3f}]",
-            "whole run: training time [s]": f"{c.train_s[-1]:.0f}"
-                                            + ("" if c.eval_s is not None else " (with evaluations)"),
+            "whole run: training time [s]": f"{c.train_s[-1]:.0f}" + (
+                "" if c.eval_s is not None else " (with evaluations)"),
         })
     return rows
 

@@ -144,11 +144,11 @@ def _command(args) -> str:
 
 
 def run_time_to_target(args) -> int:
-    import math
     import re
 
-    from ..benchmarks.time_to_target import (DEFAULT_TOLERANCE, TargetGroup, final_return,
-                                             plot_time_to_target, read_curve, section)
+    from ..benchmarks.time_to_target import (DEFAULT_TOLERANCE, TargetGroup, check_rule,
+                                             final_return, plot_time_to_target, read_curve,
+                                             section)
     from .outputs import check_path
     check_path(args.out, "--out")  # before any file is read
     if not args.run:
@@ -157,10 +157,7 @@ def run_time_to_target(args) -> int:
     if (args.target is None) == (args.target_return is None):
         raise ValueError("give one of --target AGENT and --target-return R")
     tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
-    if not (0.0 <= tolerance < 1.0):
-        raise ValueError(f"--tolerance must be in [0, 1) (got {tolerance})")
-    if args.target_return is not None and not math.isfinite(args.target_return):
-        raise ValueError(f"--target-return must be a finite number (got {args.target_return})")
+    check_rule(args.target_return, tolerance, "--target-return", "--tolerance")  # before reading
     docs = Path(args.docs) if args.docs else None
     if docs is not None and not docs.is_file():
         raise ValueError(f"--docs {docs}: no such page")
